@@ -1,0 +1,243 @@
+//! The subcommands.
+
+use crate::mesh_arg::load_mesh;
+use crate::output::{write_json, write_matrix_market, write_npy};
+use anyhow::{Context, Result, bail};
+use clap::{Subcommand, ValueEnum};
+use mfm_geometry::{MeshReport, TriMesh, io, operators, render};
+use std::path::PathBuf;
+
+/// Every `mfm` subcommand.
+#[derive(Subcommand)]
+pub enum Command {
+    /// Print a report of a mesh: counts, topology, area, quality, problems found.
+    Info {
+        /// Mesh file or builtin:NAME.
+        mesh: String,
+        /// Print the report as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Write the mesh operators: L.mtx, G.mtx (Matrix Market), mass.npy,
+    /// face_areas.npy and summary.json (with Gamma = ||M^-1 L||_F).
+    Operators {
+        /// Mesh file or builtin:NAME.
+        mesh: String,
+        /// Output folder (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Convert a mesh to OBJ or PLY (by the output extension).
+    Convert {
+        /// Mesh file or builtin:NAME.
+        mesh: String,
+        /// Output file, .obj or .ply.
+        out: PathBuf,
+    },
+    /// Render a mesh to PNG, optionally colored by a per-vertex scalar.
+    Render {
+        /// Mesh file or builtin:NAME.
+        mesh: String,
+        /// Output PNG.
+        #[arg(long)]
+        out: PathBuf,
+        /// Color by a built-in per-vertex quantity.
+        #[arg(long, value_enum, conflicts_with = "scalars")]
+        scalar: Option<Quantity>,
+        /// Color by values from a .npy file with one value per vertex.
+        #[arg(long)]
+        scalars: Option<PathBuf>,
+        /// Image width and height in pixels.
+        #[arg(long, default_value_t = 800)]
+        size: u32,
+    },
+    /// The K smallest eigenpairs of L phi = lambda M phi: eigenvalues.npy [K],
+    /// eigenvectors.npy [V, K] (M-orthonormal columns), summary.json.
+    Eigs {
+        /// Mesh file or builtin:NAME.
+        mesh: String,
+        /// Number of eigenpairs.
+        #[arg(long, default_value_t = 64)]
+        k: usize,
+        /// Output folder (created if missing).
+        #[arg(long)]
+        out: PathBuf,
+    },
+}
+
+/// Per-vertex quantities `mfm render --scalar` can show.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum Quantity {
+    /// x coordinate.
+    X,
+    /// y coordinate.
+    Y,
+    /// z coordinate.
+    Z,
+    /// Lumped (barycentric) vertex mass.
+    Mass,
+}
+
+/// Runs one subcommand.
+pub fn run(cmd: Command) -> Result<()> {
+    match cmd {
+        Command::Info { mesh, json } => info(&mesh, json),
+        Command::Operators { mesh, out } => write_operators(&mesh, &out),
+        Command::Convert { mesh, out } => convert(&mesh, &out),
+        Command::Render {
+            mesh,
+            out,
+            scalar,
+            scalars,
+            size,
+        } => render_png(&mesh, &out, scalar, scalars.as_deref(), size),
+        Command::Eigs { mesh, k, out } => crate::spectral::eigs(&mesh, k, &out),
+    }
+}
+
+fn info(spec: &str, json: bool) -> Result<()> {
+    let mesh = load_mesh(spec)?;
+    let report = MeshReport::new(&mesh);
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{report}");
+    }
+    Ok(())
+}
+
+#[derive(serde::Serialize)]
+struct OperatorSummary {
+    mesh: String,
+    vertices: usize,
+    faces: usize,
+    laplacian_nonzeros: usize,
+    gradient_nonzeros: usize,
+    total_area: f64,
+    gamma: f64,
+    files: Vec<&'static str>,
+    conventions: &'static str,
+}
+
+fn write_operators(spec: &str, out: &std::path::Path) -> Result<()> {
+    let mesh = load_mesh(spec)?;
+    let ops = operators::Operators::new(&mesh)
+        .with_context(|| format!("{spec}: cannot build operators"))?;
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create folder {}", out.display()))?;
+    write_matrix_market(&out.join("L.mtx"), &ops.laplacian)?;
+    write_matrix_market(&out.join("G.mtx"), &ops.gradient)?;
+    write_npy(&out.join("mass.npy"), &ops.mass, &[ops.mass.len() as u64])?;
+    write_npy(
+        &out.join("face_areas.npy"),
+        &ops.face_areas,
+        &[ops.face_areas.len() as u64],
+    )?;
+    let gamma = operators::gamma(&ops.laplacian, &ops.mass);
+    let summary = OperatorSummary {
+        mesh: spec.to_owned(),
+        vertices: mesh.num_vertices(),
+        faces: mesh.num_faces(),
+        laplacian_nonzeros: ops.laplacian.val().len(),
+        gradient_nonzeros: ops.gradient.val().len(),
+        total_area: ops.face_areas.iter().sum(),
+        gamma,
+        files: vec!["L.mtx", "G.mtx", "mass.npy", "face_areas.npy"],
+        conventions: "L: cotangent Laplacian, positive semi-definite (libigl cotmatrix negated); \
+mass: lumped barycentric; G: 2F x V intrinsic gradient, rows 2f,2f+1 in a per-face orthonormal frame; \
+gamma = ||M^-1 L||_F",
+    };
+    write_json(&out.join("summary.json"), &summary)?;
+    println!(
+        "wrote L.mtx ({} nnz), G.mtx ({} nnz), mass.npy, face_areas.npy, summary.json to {}; Gamma = {:.6e}",
+        summary.laplacian_nonzeros,
+        summary.gradient_nonzeros,
+        out.display(),
+        gamma
+    );
+    Ok(())
+}
+
+fn convert(spec: &str, out: &std::path::Path) -> Result<()> {
+    let mesh = load_mesh(spec)?;
+    write_mesh(&mesh, out)?;
+    println!(
+        "wrote {} ({} vertices, {} faces)",
+        out.display(),
+        mesh.num_vertices(),
+        mesh.num_faces()
+    );
+    Ok(())
+}
+
+fn write_mesh(mesh: &TriMesh, out: &std::path::Path) -> Result<()> {
+    let ext = out
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("obj") => io::write_obj(out, mesh)?,
+        Some("ply") => io::write_ply(out, mesh, &[])?,
+        _ => bail!("{}: output must end in .obj or .ply", out.display()),
+    }
+    Ok(())
+}
+
+fn render_png(
+    spec: &str,
+    out: &std::path::Path,
+    scalar: Option<Quantity>,
+    scalars: Option<&std::path::Path>,
+    size: u32,
+) -> Result<()> {
+    if !(16..=8192).contains(&size) {
+        bail!("--size {size}: expected 16..=8192 pixels");
+    }
+    let mesh = load_mesh(spec)?;
+    let values: Option<Vec<f64>> = match (scalar, scalars) {
+        (Some(q), _) => Some(match q {
+            Quantity::X => mesh.positions().iter().map(|p| p[0]).collect(),
+            Quantity::Y => mesh.positions().iter().map(|p| p[1]).collect(),
+            Quantity::Z => mesh.positions().iter().map(|p| p[2]).collect(),
+            Quantity::Mass => operators::lumped_mass(&mesh),
+        }),
+        (None, Some(path)) => Some(read_vertex_scalars(path, mesh.num_vertices())?),
+        (None, None) => None,
+    };
+    let opts = render::RenderOptions {
+        width: size,
+        height: size,
+        colorbar: values.is_some(),
+        ..Default::default()
+    };
+    let img = render::render_mesh(&mesh, values.as_deref(), &opts)?;
+    render::save_png(&img, out)?;
+    println!("wrote {}", out.display());
+    Ok(())
+}
+
+fn read_vertex_scalars(path: &std::path::Path, n: usize) -> Result<Vec<f64>> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let npy = npyz::NpyFile::new(&bytes[..])
+        .with_context(|| format!("{}: not a .npy file", path.display()))?;
+    let count: u64 = npy.shape().iter().product();
+    if count != n as u64 {
+        bail!(
+            "{}: expected {n} values (one per vertex), found shape {:?}",
+            path.display(),
+            npy.shape()
+        );
+    }
+    let values: Vec<f64> = match npy.dtype() {
+        npyz::DType::Plain(t) if t.type_char() == npyz::TypeChar::Float && t.size_field() == 4 => {
+            npy.into_vec::<f32>()
+                .with_context(|| format!("{}: cannot read values", path.display()))?
+                .into_iter()
+                .map(f64::from)
+                .collect()
+        }
+        _ => npy
+            .into_vec::<f64>()
+            .with_context(|| format!("{}: expected float64 or float32 values", path.display()))?,
+    };
+    Ok(values)
+}

@@ -1,0 +1,244 @@
+//! End-to-end tests that drive the real `mfm` binary.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn mfm(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mfm"))
+        .args(args)
+        .output()
+        .expect("the mfm binary runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn fixtures() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures")
+}
+
+#[test]
+fn info_on_builtin_reports_counts_and_topology() {
+    let o = mfm(&["info", "builtin:icosphere:2", "--json"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("json");
+    assert_eq!(v["num_vertices"], 162);
+    assert_eq!(v["num_faces"], 320);
+    assert_eq!(v["euler_characteristic"], 2);
+    assert_eq!(v["genus"], 0);
+    let text = mfm(&["info", "builtin:torus"]);
+    assert!(text.status.success());
+    assert!(String::from_utf8_lossy(&text.stdout).contains("genus"));
+}
+
+#[test]
+fn bad_input_exits_non_zero_with_one_line_naming_the_file() {
+    let missing = mfm(&["info", "/nonexistent/mesh.off"]);
+    assert!(!missing.status.success());
+    let e = stderr(&missing);
+    assert_eq!(e.trim_end().lines().count(), 1, "one line: {e}");
+    assert!(e.contains("/nonexistent/mesh.off"), "{e}");
+
+    let unknown = mfm(&["info", "builtin:dodecahedron"]);
+    assert!(!unknown.status.success());
+    assert!(stderr(&unknown).contains("unknown built-in mesh"));
+
+    // every bad fixture that fails to load gives one line naming it
+    let dir = fixtures().join("bad");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&dir).expect("fixtures/bad exists") {
+        let path = entry.expect("entry").path();
+        let o = mfm(&["info", path.to_str().expect("utf8 path")]);
+        if !o.status.success() {
+            let e = stderr(&o);
+            assert_eq!(e.trim_end().lines().count(), 1, "{}: {e}", path.display());
+            let name = path
+                .file_name()
+                .expect("name")
+                .to_string_lossy()
+                .into_owned();
+            assert!(e.contains(&name), "{e}");
+            seen += 1;
+        }
+    }
+    assert!(seen > 0);
+}
+
+#[test]
+fn operators_are_written_and_consistent() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("ops");
+    let o = mfm(&[
+        "operators",
+        "builtin:icosphere:2",
+        "--out",
+        out.to_str().expect("utf8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // L.mtx: header, size line, and L 1 = 0 (rows sum to zero)
+    let text = std::fs::read_to_string(out.join("L.mtx")).expect("L.mtx");
+    let mut lines = text.lines().filter(|l| !l.starts_with('%'));
+    let dims: Vec<usize> = lines
+        .next()
+        .expect("size line")
+        .split_whitespace()
+        .map(|t| t.parse().expect("int"))
+        .collect();
+    assert_eq!(&dims[..2], &[162, 162]);
+    let mut row_sum = vec![0.0f64; 162];
+    let mut count = 0;
+    for l in lines {
+        let t: Vec<&str> = l.split_whitespace().collect();
+        let i: usize = t[0].parse().expect("row");
+        let v: f64 = t[2].parse().expect("value");
+        row_sum[i - 1] += v;
+        count += 1;
+    }
+    assert_eq!(count, dims[2]);
+    assert!(row_sum.iter().all(|s| s.abs() < 1e-12));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).expect("summary"))
+            .expect("json");
+    let gamma = summary["gamma"].as_f64().expect("gamma");
+    assert!(gamma.is_finite() && gamma > 0.0);
+    // the mass file sums to the surface area
+    let bytes = std::fs::read(out.join("mass.npy")).expect("mass.npy");
+    let mass: Vec<f64> = npyz::NpyFile::new(&bytes[..])
+        .expect("npy")
+        .into_vec()
+        .expect("f64");
+    let area = summary["total_area"].as_f64().expect("area");
+    assert!((mass.iter().sum::<f64>() - area).abs() < 1e-12 * area);
+}
+
+#[test]
+fn operators_files_are_readable_by_scipy() {
+    let Some(python) = mfm_geometry::test_support::python_oracle() else {
+        return;
+    };
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("ops");
+    let o = mfm(&[
+        "operators",
+        "builtin:torus",
+        "--out",
+        out.to_str().expect("utf8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let script = r#"
+import sys, json, numpy as np, scipy.io
+d = sys.argv[1]
+L = scipy.io.mmread(d + "/L.mtx").tocsr()
+G = scipy.io.mmread(d + "/G.mtx").tocsr()
+m = np.load(d + "/mass.npy"); a = np.load(d + "/face_areas.npy")
+a2 = np.repeat(a, 2)
+r = abs(G.T @ (a2[:, None] * G.toarray()) - L.toarray()).max() / abs(L).max()
+print(json.dumps({"n": L.shape[0], "gtag": float(r), "sym": float(abs(L - L.T).max()), "m": float(m.sum()), "a": float(a.sum())}))
+"#;
+    let res = Command::new(python)
+        .args(["-c", script, out.to_str().expect("utf8")])
+        .output()
+        .expect("python runs");
+    assert!(
+        res.status.success(),
+        "{}",
+        String::from_utf8_lossy(&res.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&res.stdout).expect("json");
+    assert!(v["gtag"].as_f64().expect("f") < 1e-12, "{v}");
+    assert_eq!(v["sym"].as_f64(), Some(0.0));
+    assert!((v["m"].as_f64().expect("m") - v["a"].as_f64().expect("a")).abs() < 1e-10);
+}
+
+#[test]
+fn convert_and_render_write_files() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ply = dir.path().join("t.ply");
+    let o = mfm(&["convert", "builtin:capsule", ply.to_str().expect("utf8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let back = mfm(&["info", ply.to_str().expect("utf8"), "--json"]);
+    assert!(back.status.success(), "{}", stderr(&back));
+    let png = dir.path().join("t.png");
+    let r = mfm(&[
+        "render",
+        ply.to_str().expect("utf8"),
+        "--scalar",
+        "z",
+        "--size",
+        "64",
+        "--out",
+        png.to_str().expect("utf8"),
+    ]);
+    assert!(r.status.success(), "{}", stderr(&r));
+    let bytes = std::fs::read(&png).expect("png written");
+    assert_eq!(&bytes[1..4], b"PNG");
+    let bad = mfm(&[
+        "convert",
+        "builtin:capsule",
+        dir.path().join("t.stl").to_str().expect("utf8"),
+    ]);
+    assert!(!bad.status.success());
+    assert!(stderr(&bad).contains(".obj or .ply"));
+}
+
+fn read_npy(path: &Path) -> Vec<f64> {
+    let bytes = std::fs::read(path).expect("npy file");
+    npyz::NpyFile::new(&bytes[..])
+        .expect("npy")
+        .into_vec()
+        .expect("f64")
+}
+
+#[test]
+fn eigs_match_the_sphere_spectrum_and_are_mass_orthonormal() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("eigs");
+    let ops = dir.path().join("ops");
+    let mesh = "builtin:icosphere:3";
+    let o = mfm(&[
+        "eigs",
+        mesh,
+        "--k",
+        "9",
+        "--out",
+        out.to_str().expect("utf8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = mfm(&["operators", mesh, "--out", ops.to_str().expect("utf8")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let values = read_npy(&out.join("eigenvalues.npy"));
+    let vectors = read_npy(&out.join("eigenvectors.npy"));
+    let mass = read_npy(&ops.join("mass.npy"));
+    let (n, k) = (mass.len(), 9);
+    assert_eq!(values.len(), k);
+    assert_eq!(vectors.len(), n * k);
+    // unit sphere: l(l+1) with multiplicity 2l+1 -> 0, 2 x3, 6 x5
+    assert!(values[0].abs() < 1e-8, "{values:?}");
+    for (i, &lambda) in values.iter().enumerate().skip(1) {
+        let exact = if i < 4 { 2.0 } else { 6.0 };
+        assert!(
+            (lambda - exact).abs() < 0.03 * exact,
+            "lambda_{i} = {lambda}"
+        );
+    }
+    for a in 0..k {
+        for b in 0..k {
+            let dot: f64 = (0..n)
+                .map(|v| vectors[v * k + a] * mass[v] * vectors[v * k + b])
+                .sum();
+            let expected = if a == b { 1.0 } else { 0.0 };
+            assert!((dot - expected).abs() < 1e-8, "({a},{b}) -> {dot}");
+        }
+    }
+    let bad = mfm(&[
+        "eigs",
+        mesh,
+        "--k",
+        "0",
+        "--out",
+        out.to_str().expect("utf8"),
+    ]);
+    assert!(!bad.status.success());
+    assert!(stderr(&bad).contains("--k"));
+}

@@ -1,0 +1,148 @@
+//! Project automation: `cargo xtask <command>`.
+//!
+//! - `setup`: create (once) the Python environment with the pinned torch whose
+//!   libtorch `tch` links against, and the test oracles; print the variables to
+//!   export for plain `cargo` use.
+//! - `test`: setup, then every test of the workspace (oracle tests may not skip).
+//! - `lint`: `cargo fmt --check` and `cargo clippy --all-targets -D warnings`.
+//! - `demo`: the main job on a built-in default.
+//! - `bench operators`: operator assembly times, ours and libigl's, in one run.
+
+mod bench;
+mod demo;
+mod pyenv;
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+#[derive(Parser)]
+#[command(name = "cargo xtask", about = "mfm project automation")]
+struct Cli {
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Create the Python/libtorch environment if missing and print its variables.
+    Setup,
+    /// Set up, then run all tests of the workspace (extra args go to `cargo test`).
+    Test {
+        /// Arguments passed through to `cargo test`.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
+    /// Formatting and clippy checks (warnings are errors).
+    Lint,
+    /// Run the demo: the main job on a built-in default mesh.
+    Demo {
+        /// Output folder.
+        #[arg(long, default_value = "out/demo")]
+        out: PathBuf,
+    },
+    /// Benchmarks against the Python reference stack, in one run.
+    #[command(subcommand)]
+    Bench(BenchCmd),
+}
+
+#[derive(Subcommand)]
+enum BenchCmd {
+    /// Operator assembly (L, M, areas, G): libigl vs mfm-geometry on the same arrays.
+    Operators {
+        /// Mesh file to time (and its midpoint subdivisions).
+        #[arg(long, default_value = "../shared/meshes/bunny.off")]
+        mesh: PathBuf,
+        /// Comma-separated subdivision levels (each multiplies the faces by 4).
+        #[arg(long, default_value = "0,2,3,4")]
+        levels: String,
+        /// Timed runs per operator (the median is reported).
+        #[arg(long, default_value_t = 9)]
+        runs: u32,
+    },
+}
+
+/// The workspace root (parent of this crate's folder).
+pub fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."))
+}
+
+/// Cargo's target folder: `CARGO_TARGET_DIR` (relative to the workspace root)
+/// or `target/` in the workspace root.
+pub fn target_dir() -> PathBuf {
+    match std::env::var_os("CARGO_TARGET_DIR") {
+        Some(dir) => root().join(dir),
+        None => root().join("target"),
+    }
+}
+
+/// A `cargo` command in the workspace root with the environment applied.
+pub fn cargo(env: &pyenv::PyEnv) -> Command {
+    let mut cmd = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned()));
+    cmd.current_dir(root());
+    for (k, v) in env.cargo_env() {
+        cmd.env(k, v);
+    }
+    cmd
+}
+
+/// Runs a command, failing with its status.
+pub fn run(cmd: &mut Command) -> Result<()> {
+    let status = cmd
+        .status()
+        .with_context(|| format!("cannot run {cmd:?}"))?;
+    if !status.success() {
+        bail!("command failed ({status}): {cmd:?}");
+    }
+    Ok(())
+}
+
+fn main() -> Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Cmd::Setup => {
+            let env = pyenv::ensure()?;
+            println!("# mfm environment ready; for plain cargo use:");
+            for (k, v) in env.cargo_env() {
+                println!("export {k}={}", v.display());
+            }
+            Ok(())
+        }
+        Cmd::Test { args } => {
+            let env = pyenv::ensure()?;
+            run(cargo(&env)
+                .args(["test", "--workspace"])
+                .args(&args)
+                .env("MFM_REQUIRE_ORACLES", "1"))
+        }
+        Cmd::Lint => {
+            let env = pyenv::ensure()?;
+            run(cargo(&env).args(["fmt", "--all", "--", "--check"]))?;
+            run(cargo(&env).args([
+                "clippy",
+                "--workspace",
+                "--all-targets",
+                "--",
+                "-D",
+                "warnings",
+            ]))
+        }
+        Cmd::Demo { out } => {
+            let env = pyenv::ensure()?;
+            demo::run(&env, &out)
+        }
+        Cmd::Bench(BenchCmd::Operators { mesh, levels, runs }) => {
+            let env = pyenv::ensure()?;
+            let mesh = if mesh.is_relative() {
+                root().join(mesh)
+            } else {
+                mesh
+            };
+            bench::operators(&env, &mesh, &levels, runs)
+        }
+    }
+}
