@@ -124,8 +124,8 @@ fn print_table(igl: &Value, ours: &Value) -> Result<()> {
             println!(
                 "| {:<20} | {:>8} | {:>9} | {:>10.2} | {:>10.2} | {:>6.2} |",
                 op,
-                ro["vertices"],
-                ro["faces"],
+                ro["vertices"].as_u64().unwrap_or(0),
+                ro["faces"].as_u64().unwrap_or(0),
                 ti,
                 to,
                 ti / to

@@ -1,0 +1,613 @@
+//! [`NoiseSampler`]: per-mesh state for drawing batches of noise, and
+//! [`NoiseBatch`], the `[samples, vertices, channels]` array it returns.
+//!
+//! The sampler is built once per mesh and [`NoiseKind`]: it keeps the lumped
+//! mass, `Gamma = ||M^-1 L||_F`, the Cholesky factor of `L + tau M` (Matérn
+//! kinds, through [`mfm_solver::ScreenedPoisson`]) or the `k` lowest
+//! eigenpairs (explicit kind, through [`mfm_solver::generalized_eigenpairs`]).
+//! Each call to [`NoiseSampler::sample`] then draws all right-hand sides of a
+//! block and solves them together.
+//!
+//! ## Randomness and determinism
+//! Sample `i`, channel `c` of seed `s` is drawn from its own ChaCha8 stream
+//! (key from `s`, stream id `i`, word offset `c * 2^40`), with standard
+//! normals from `rand_distr::StandardNormal` (ziggurat), one per vertex in
+//! vertex order (one per eigenpair for the explicit kind). Consequences:
+//! - the output is bit-identical whatever the rayon thread count and however
+//!   the batch is cut into blocks (the solver's block solves are column-wise
+//!   bit-identical to single solves);
+//! - [`NoiseSampler::sample_range`] continues a sequence:
+//!   `sample_range(first, n, ..)` returns samples `first .. first + n` of the
+//!   same seed, so large sets can be drawn in pieces;
+//! - channel `c` of a sample does not depend on how many channels are drawn.
+//!
+//! Results are reproducible on a given machine and instruction set (the
+//! solver picks AVX2/AVX-512 kernels at run time).
+
+use faer::MatMut;
+use faer::sparse::SparseColMat;
+use mfm_geometry::TriMesh;
+use mfm_geometry::operators::{Operators, try_gamma};
+use mfm_solver::{EigenOptions, Eigenpairs, ScreenedPoisson, generalized_eigenpairs};
+use rayon::prelude::*;
+
+use crate::error::{NoiseError, Result};
+use crate::kind::NoiseKind;
+use crate::rng::{MAX_CHANNELS, fill_normals, stream};
+
+/// A batch of noise signals: `samples x vertices x channels` values stored
+/// row-major (`data[(s * vertices + v) * channels + c]`), so each sample is a
+/// contiguous `vertices x channels` block (vertex-major, like a `V x 3`
+/// position array when `channels == 3`).
+///
+/// # Example
+/// ```
+/// use mfm_noise::NoiseBatch;
+/// let b = NoiseBatch::from_vec(vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0], 1, 3, 2).unwrap();
+/// assert_eq!(b.get(0, 2, 1), 6.0);
+/// assert_eq!(b.signal(0, 0), vec![1.0, 3.0, 5.0]);
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct NoiseBatch<T = f64> {
+    data: Vec<T>,
+    samples: usize,
+    vertices: usize,
+    channels: usize,
+}
+
+impl<T: Copy> NoiseBatch<T> {
+    /// Wraps `data` (row-major `[samples, vertices, channels]`), e.g. signals
+    /// produced elsewhere that should go through the spectral diagnostics.
+    ///
+    /// # Errors
+    /// [`NoiseError::SizeMismatch`] if `data.len() != samples * vertices * channels`;
+    /// [`NoiseError::TooLarge`] if that product overflows.
+    pub fn from_vec(
+        data: Vec<T>,
+        samples: usize,
+        vertices: usize,
+        channels: usize,
+    ) -> Result<Self> {
+        let len = checked_len(samples, vertices, channels)?;
+        if data.len() != len {
+            return Err(NoiseError::SizeMismatch {
+                what: "batch data length",
+                expected: len,
+                found: data.len(),
+            });
+        }
+        Ok(Self {
+            data,
+            samples,
+            vertices,
+            channels,
+        })
+    }
+
+    /// Number of samples `N`.
+    pub fn samples(&self) -> usize {
+        self.samples
+    }
+
+    /// Number of vertices `V`.
+    pub fn vertices(&self) -> usize {
+        self.vertices
+    }
+
+    /// Number of channels `C`.
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
+    /// All values, row-major `[N, V, C]`.
+    pub fn data(&self) -> &[T] {
+        &self.data
+    }
+
+    /// The values, row-major `[N, V, C]`, by value.
+    pub fn into_data(self) -> Vec<T> {
+        self.data
+    }
+
+    /// Sample `s` as a `V x C` vertex-major slice.
+    ///
+    /// # Panics
+    /// If `s >= samples()`.
+    pub fn sample(&self, s: usize) -> &[T] {
+        let w = self.vertices * self.channels;
+        &self.data[s * w..(s + 1) * w]
+    }
+
+    /// Value of sample `s`, vertex `v`, channel `c`.
+    ///
+    /// # Panics
+    /// If an index is out of range.
+    pub fn get(&self, s: usize, v: usize, c: usize) -> T {
+        assert!(c < self.channels && v < self.vertices, "index out of range");
+        self.data[(s * self.vertices + v) * self.channels + c]
+    }
+
+    /// Channel `c` of sample `s` as one value per vertex (a copy).
+    ///
+    /// # Panics
+    /// If an index is out of range.
+    pub fn signal(&self, s: usize, c: usize) -> Vec<T> {
+        assert!(c < self.channels, "channel out of range");
+        self.sample(s)
+            .iter()
+            .skip(c)
+            .step_by(self.channels)
+            .copied()
+            .collect()
+    }
+}
+
+impl NoiseBatch<f64> {
+    /// The batch rounded to `f32`.
+    pub fn to_f32(&self) -> NoiseBatch<f32> {
+        NoiseBatch {
+            data: self.data.iter().map(|&x| x as f32).collect(),
+            samples: self.samples,
+            vertices: self.vertices,
+            channels: self.channels,
+        }
+    }
+}
+
+fn checked_len(samples: usize, vertices: usize, channels: usize) -> Result<usize> {
+    samples
+        .checked_mul(vertices)
+        .and_then(|x| x.checked_mul(channels))
+        .ok_or(NoiseError::TooLarge {
+            samples,
+            vertices,
+            channels,
+        })
+}
+
+/// What each column of a block goes through after the normals are drawn.
+#[derive(Debug)]
+enum Engine {
+    /// `x = scale_v * n_v` per vertex (naive: 1, white: `M^-1/2`).
+    Diagonal(Option<Vec<f64>>),
+    /// `x = (L + tau M)^-1 M^1/2 n`, times an amplitude.
+    Poisson {
+        poisson: ScreenedPoisson,
+        sqrt_mass: Vec<f64>,
+    },
+    /// `x = sum_i weight_i chi_i phi_i`.
+    Explicit {
+        pairs: Eigenpairs,
+        weights: Vec<f64>,
+    },
+}
+
+/// Noise sampler for one mesh and one [`NoiseKind`]; see the
+/// [module docs](self) for the randomness and determinism guarantees.
+///
+/// Conventions: `L` PSD cotangent Laplacian, `M` lumped mass (positive at
+/// every vertex), `Gamma = ||M^-1 L||_F` (DESIGN.md §3).
+///
+/// Cost of construction: operators `O(V + F)`; Matérn kinds one sparse
+/// Cholesky factorization of `L + tau M`; explicit kind one eigensolve for
+/// `k` pairs. Cost per sample and channel: Matérn one forward/backward
+/// substitution (`~4 nnz(factor)` flops, batched), explicit `O(V k)`,
+/// naive/white `O(V)`, plus `V` normals. `Send + Sync`.
+///
+/// # Example
+/// ```
+/// use mfm_geometry::procedural;
+/// use mfm_noise::{NoiseKind, NoiseSampler};
+/// let mesh = procedural::icosphere(3);
+/// let sampler = NoiseSampler::new(&mesh, NoiseKind::Matern { tau: 100.0 }).unwrap();
+/// let batch = sampler.sample(8, 3, 42).unwrap(); // 8 samples of xyz noise
+/// assert_eq!((batch.samples(), batch.vertices(), batch.channels()), (8, mesh.num_vertices(), 3));
+/// // the same seed gives the same bits; sample_range continues the sequence
+/// assert_eq!(sampler.sample_range(5, 3, 3, 42).unwrap().data(), &batch.data()[5 * 642 * 3..]);
+/// ```
+#[derive(Debug)]
+pub struct NoiseSampler {
+    kind: NoiseKind,
+    mass: Vec<f64>,
+    gamma: f64,
+    tau: Option<f64>,
+    amplitude: f64,
+    engine: Engine,
+}
+
+impl NoiseSampler {
+    /// Builds the operators of `mesh` and the sampler for `kind`.
+    ///
+    /// # Errors
+    /// [`NoiseError::InvalidParameter`] (see [`NoiseKind::validate`]),
+    /// [`NoiseError::Operators`] (a degenerate face),
+    /// [`NoiseError::NonPositiveMass`] (an unreferenced vertex), and those of
+    /// [`NoiseSampler::from_operators`].
+    pub fn new(mesh: &TriMesh, kind: NoiseKind) -> Result<Self> {
+        kind.validate()?;
+        let ops = Operators::new(mesh)?;
+        Self::from_operators(&ops.laplacian, &ops.mass, kind)
+    }
+
+    /// Builds the sampler from a PSD Laplacian `l` (`V x V`, lower triangle
+    /// read) and the lumped mass diagonal `mass`, e.g. operators the caller
+    /// already has.
+    ///
+    /// # Errors
+    /// [`NoiseError::InvalidParameter`], [`NoiseError::SizeMismatch`],
+    /// [`NoiseError::NonPositiveMass`], [`NoiseError::Operators`] (a
+    /// non-square `l`), [`NoiseError::Solver`] (the factorization or the
+    /// eigensolve failed, e.g. `k > V` or `L` not PSD).
+    pub fn from_operators(
+        l: &SparseColMat<usize, f64>,
+        mass: &[f64],
+        kind: NoiseKind,
+    ) -> Result<Self> {
+        kind.validate()?;
+        if l.nrows() == l.ncols() && mass.len() != l.nrows() {
+            return Err(NoiseError::SizeMismatch {
+                what: "mass vector length",
+                expected: l.nrows(),
+                found: mass.len(),
+            });
+        }
+        if let Some((vertex, &m)) = mass
+            .iter()
+            .enumerate()
+            .find(|(_, m)| !(m.is_finite() && **m > 0.0))
+        {
+            return Err(NoiseError::NonPositiveMass { vertex, mass: m });
+        }
+        let gamma = try_gamma(l, mass)?;
+        let sqrt_mass = || mass.iter().map(|m| m.sqrt()).collect::<Vec<_>>();
+        let (tau, amplitude, engine) = match kind {
+            NoiseKind::Naive => (None, 1.0, Engine::Diagonal(None)),
+            NoiseKind::White => (
+                None,
+                1.0,
+                Engine::Diagonal(Some(mass.iter().map(|m| 1.0 / m.sqrt()).collect())),
+            ),
+            NoiseKind::Matern { tau } => (
+                Some(tau),
+                1.0,
+                Engine::Poisson {
+                    poisson: ScreenedPoisson::new(l, mass, tau)?,
+                    sqrt_mass: sqrt_mass(),
+                },
+            ),
+            NoiseKind::MaternNormalized { c } => {
+                let tau = c * gamma;
+                if !(tau.is_finite() && tau > 0.0) {
+                    return Err(NoiseError::InvalidParameter {
+                        name: "c",
+                        expected: "c * Gamma finite and > 0 (a mesh with a nonzero Laplacian)",
+                        found: format!("c = {c}, Gamma = {gamma}"),
+                    });
+                }
+                (
+                    Some(tau),
+                    gamma.sqrt(),
+                    Engine::Poisson {
+                        poisson: ScreenedPoisson::new(l, mass, tau)?,
+                        sqrt_mass: sqrt_mass(),
+                    },
+                )
+            }
+            NoiseKind::Explicit { k, tau } => {
+                let pairs = generalized_eigenpairs(l, mass, k, &EigenOptions::default())?;
+                let weights = explicit_weights(&pairs.values, tau);
+                (Some(tau), 1.0, Engine::Explicit { pairs, weights })
+            }
+        };
+        Ok(Self {
+            kind,
+            mass: mass.to_vec(),
+            gamma,
+            tau,
+            amplitude,
+            engine,
+        })
+    }
+
+    /// The kind this sampler draws.
+    pub fn kind(&self) -> NoiseKind {
+        self.kind
+    }
+
+    /// Number of vertices `V`.
+    pub fn num_vertices(&self) -> usize {
+        self.mass.len()
+    }
+
+    /// The lumped mass (diagonal of `M`).
+    pub fn mass(&self) -> &[f64] {
+        &self.mass
+    }
+
+    /// `Gamma = ||M^-1 L||_F` of the mesh (computed for every kind).
+    pub fn gamma(&self) -> f64 {
+        self.gamma
+    }
+
+    /// The screening weight in use: `tau` for Matérn and explicit,
+    /// `c * Gamma` for normalized Matérn, `None` for naive and white.
+    pub fn tau(&self) -> Option<f64> {
+        self.tau
+    }
+
+    /// Factor applied to every sample: `sqrt(Gamma)` for normalized Matérn,
+    /// `1` otherwise.
+    pub fn amplitude(&self) -> f64 {
+        self.amplitude
+    }
+
+    /// The eigenpairs of the explicit kind (`None` for the others).
+    pub fn eigenpairs(&self) -> Option<&Eigenpairs> {
+        match &self.engine {
+            Engine::Explicit { pairs, .. } => Some(pairs),
+            _ => None,
+        }
+    }
+
+    /// The factored `L + tau M` of the Matérn kinds (`None` for the others);
+    /// reuse it for other screened Poisson solves on the mesh.
+    pub fn screened_poisson(&self) -> Option<&ScreenedPoisson> {
+        match &self.engine {
+            Engine::Poisson { poisson, .. } => Some(poisson),
+            _ => None,
+        }
+    }
+
+    /// The theoretical `Var(c_i)` of this sampler's noise for the given
+    /// eigenpairs of the same mesh (see [`crate::spectrum::theoretical_variance`]).
+    ///
+    /// # Errors
+    /// [`NoiseError::SizeMismatch`] if `pairs` has another vertex count.
+    pub fn theoretical_variance(&self, pairs: &Eigenpairs) -> Result<Vec<f64>> {
+        crate::spectrum::theoretical_variance(self.kind, pairs, &self.mass, self.gamma)
+    }
+
+    /// Draws `samples` samples of `channels` independent channels each, from
+    /// `seed`: the same as [`NoiseSampler::sample_range`]`(0, samples, channels, seed)`.
+    ///
+    /// # Errors
+    /// See [`NoiseSampler::sample_range`].
+    pub fn sample(&self, samples: usize, channels: usize, seed: u64) -> Result<NoiseBatch> {
+        self.sample_range(0, samples, channels, seed)
+    }
+
+    /// Draws samples `first .. first + count` of the sequence of `seed`
+    /// (`channels` independent channels each) as a `[count, V, channels]`
+    /// batch. Blocks of samples are solved together; the rayon pool runs the
+    /// random draws, the solves and the scatter in parallel.
+    ///
+    /// # Errors
+    /// [`NoiseError::InvalidParameter`] (`channels == 0` or `>= 2^28`),
+    /// [`NoiseError::TooLarge`], [`NoiseError::Solver`].
+    pub fn sample_range(
+        &self,
+        first: usize,
+        count: usize,
+        channels: usize,
+        seed: u64,
+    ) -> Result<NoiseBatch> {
+        self.check_channels(channels)?;
+        let v = self.num_vertices();
+        let mut data = vec![0.0; checked_len(count, v, channels)?];
+        if data.is_empty() {
+            return NoiseBatch::from_vec(data, count, v, channels);
+        }
+        let per_block = self.block_samples(channels);
+        // one channel: [N, V, 1] is the column-major block itself, so draw,
+        // solve and scale in the output; otherwise go through a scratch block
+        let mut scratch = vec![
+            0.0;
+            if channels > 1 {
+                per_block * v * channels
+            } else {
+                0
+            }
+        ];
+        for (b, out) in data.chunks_mut(per_block * v * channels).enumerate() {
+            let start = first + b * per_block;
+            let cols = out.len() / v;
+            if channels == 1 {
+                self.draw_into(out, start, 1, seed);
+                self.solve_block(out, cols)?;
+                let amp = self.amplitude;
+                out.par_iter_mut().for_each(|x| *x *= amp);
+            } else {
+                let block = &mut scratch[..out.len()];
+                self.draw_into(block, start, channels, seed);
+                self.solve_block(block, cols)?;
+                scatter(block, out, v, channels, self.amplitude);
+            }
+        }
+        NoiseBatch::from_vec(data, count, v, channels)
+    }
+
+    /// [`NoiseSampler::sample`] in `f32`. The random draws are the `f64` ones;
+    /// Matérn solves run with the solver's `f32` factor (relative accuracy
+    /// about `cond(L + tau M) * 6e-8`, typically `< 1e-5`), the other kinds
+    /// are computed in `f64` and rounded.
+    ///
+    /// # Errors
+    /// See [`NoiseSampler::sample_range`].
+    pub fn sample_f32(
+        &self,
+        samples: usize,
+        channels: usize,
+        seed: u64,
+    ) -> Result<NoiseBatch<f32>> {
+        self.sample_range_f32(0, samples, channels, seed)
+    }
+
+    /// [`NoiseSampler::sample_range`] in `f32` (see [`NoiseSampler::sample_f32`]).
+    ///
+    /// # Errors
+    /// See [`NoiseSampler::sample_range`].
+    pub fn sample_range_f32(
+        &self,
+        first: usize,
+        count: usize,
+        channels: usize,
+        seed: u64,
+    ) -> Result<NoiseBatch<f32>> {
+        let Engine::Poisson { poisson, .. } = &self.engine else {
+            return Ok(self.sample_range(first, count, channels, seed)?.to_f32());
+        };
+        self.check_channels(channels)?;
+        let v = self.num_vertices();
+        let mut data = vec![0.0f32; checked_len(count, v, channels)?];
+        if data.is_empty() {
+            return NoiseBatch::from_vec(data, count, v, channels);
+        }
+        let per_block = self.block_samples(channels);
+        let mut scratch = vec![0.0; per_block * v * channels];
+        let mut scratch32 = vec![
+            0.0f32;
+            if channels > 1 {
+                per_block * v * channels
+            } else {
+                0
+            }
+        ];
+        let amp = self.amplitude as f32;
+        for (b, out) in data.chunks_mut(per_block * v * channels).enumerate() {
+            let start = first + b * per_block;
+            let cols = out.len() / v;
+            let block = &mut scratch[..out.len()];
+            self.draw_into(block, start, channels, seed);
+            let block32 = if channels == 1 {
+                &mut *out
+            } else {
+                &mut scratch32[..block.len()]
+            };
+            block32
+                .par_iter_mut()
+                .zip(block.par_iter())
+                .for_each(|(y, x)| *y = *x as f32);
+            poisson
+                .solve_many_f32_in_place(MatMut::from_column_major_slice_mut(block32, v, cols))?;
+            if channels == 1 {
+                out.par_iter_mut().for_each(|x| *x *= amp);
+            } else {
+                scatter(&scratch32[..out.len()], out, v, channels, amp);
+            }
+        }
+        NoiseBatch::from_vec(data, count, v, channels)
+    }
+
+    fn check_channels(&self, channels: usize) -> Result<()> {
+        if channels == 0 || channels >= MAX_CHANNELS {
+            return Err(NoiseError::InvalidParameter {
+                name: "channels",
+                expected: "between 1 and 2^28 - 1",
+                found: channels.to_string(),
+            });
+        }
+        Ok(())
+    }
+
+    /// Samples per block: about 128 right-hand sides, fewer on large meshes
+    /// so that a block stays under ~32 MiB.
+    fn block_samples(&self, channels: usize) -> usize {
+        let v = self.num_vertices().max(1);
+        let cols = (4_194_304 / v).clamp(16, 128);
+        (cols / channels).max(1)
+    }
+
+    /// Solves the Matérn system in place for a column-major `V x cols` block
+    /// (nothing for the other kinds).
+    fn solve_block(&self, block: &mut [f64], cols: usize) -> Result<()> {
+        if let Engine::Poisson { poisson, .. } = &self.engine {
+            let v = self.num_vertices();
+            poisson.solve_many_in_place(MatMut::from_column_major_slice_mut(block, v, cols))?;
+        }
+        Ok(())
+    }
+
+    /// Fills the column-major `V x cols` `block`: column `j` is sample
+    /// `start + j / channels`, channel `j % channels`, before any solve.
+    fn draw_into(&self, block: &mut [f64], start: usize, channels: usize, seed: u64) {
+        let v = self.num_vertices();
+        if v == 0 {
+            return;
+        }
+        block.par_chunks_mut(v).enumerate().for_each(|(j, col)| {
+            let sample = (start + j / channels) as u64;
+            let mut rng = stream(seed, sample, (j % channels) as u64);
+            match &self.engine {
+                Engine::Diagonal(scale) => {
+                    fill_normals(&mut rng, col);
+                    if let Some(s) = scale {
+                        col.iter_mut().zip(s).for_each(|(x, s)| *x *= s);
+                    }
+                }
+                Engine::Poisson { sqrt_mass, .. } => {
+                    fill_normals(&mut rng, col);
+                    col.iter_mut().zip(sqrt_mass).for_each(|(x, s)| *x *= s);
+                }
+                Engine::Explicit { pairs, weights } => {
+                    col.fill(0.0);
+                    let mut chi = vec![0.0; weights.len()];
+                    fill_normals(&mut rng, &mut chi);
+                    for (i, (&w, &z)) in weights.iter().zip(&chi).enumerate() {
+                        let a = w * z;
+                        if a != 0.0 {
+                            let phi = pairs.vectors.col(i);
+                            col.iter_mut()
+                                .zip(phi.iter())
+                                .for_each(|(x, p)| *x += a * p);
+                        }
+                    }
+                }
+            }
+        });
+    }
+}
+
+/// `1 / (lambda_i + tau)`, with the zero modes left out when `tau == 0`.
+pub(crate) fn explicit_weights(values: &[f64], tau: f64) -> Vec<f64> {
+    let zero = zero_mode_tolerance(values);
+    values
+        .iter()
+        .map(|&l| {
+            if tau == 0.0 && l <= zero {
+                0.0
+            } else {
+                1.0 / (l + tau)
+            }
+        })
+        .collect()
+}
+
+/// Eigenvalues at or below this count as zero modes (constants per
+/// connected component): `1e-8` times the largest computed eigenvalue.
+pub(crate) fn zero_mode_tolerance(values: &[f64]) -> f64 {
+    1e-8 * values.iter().copied().fold(0.0, f64::max)
+}
+
+/// Writes the column-major block (column `s * channels + c`) into the
+/// row-major `[n, V, C]` output, multiplied by `amp`.
+fn scatter<T: Copy + Send + Sync + std::ops::Mul<Output = T>>(
+    block: &[T],
+    out: &mut [T],
+    v: usize,
+    channels: usize,
+    amp: T,
+) {
+    if v == 0 {
+        return;
+    }
+    out.par_chunks_mut(v * channels)
+        .enumerate()
+        .for_each(|(s, dst)| {
+            for c in 0..channels {
+                let col = &block[(s * channels + c) * v..][..v];
+                for (i, &x) in col.iter().enumerate() {
+                    dst[i * channels + c] = x * amp;
+                }
+            }
+        });
+}

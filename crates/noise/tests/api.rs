@@ -1,0 +1,357 @@
+//! The sampler against its defining equations (one sample at a time, with
+//! independent arithmetic), the parsing and serialization of kinds, the
+//! spectral tools on signals with known coefficients, the plots, and the
+//! error paths.
+#![allow(clippy::unwrap_used, clippy::needless_range_loop)]
+
+mod common;
+
+use faer::sparse::SparseColMat;
+use mfm_geometry::TriMesh;
+use mfm_geometry::operators::Operators;
+use mfm_noise::plots::{HistogramPanel, VarianceSeries, coefficient_histograms, variance_plot};
+use mfm_noise::spectrum::{self, SpectralAnalyzer};
+use mfm_noise::{NoiseBatch, NoiseError, NoiseKind, NoiseSampler, SpectrumReport};
+use proptest::prelude::*;
+
+/// `y = L x` from the CSC arrays (both triangles are stored).
+fn matvec(l: &SparseColMat<usize, f64>, x: &[f64]) -> Vec<f64> {
+    let mut y = vec![0.0; x.len()];
+    let (cp, ri, val) = (l.symbolic().col_ptr(), l.symbolic().row_idx(), l.val());
+    for j in 0..x.len() {
+        for p in cp[j]..cp[j + 1] {
+            y[ri[p]] += val[p] * x[j];
+        }
+    }
+    y
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// All kinds draw their normals from the same per-(sample, channel)
+/// streams, so naive noise *is* the normals `n` each kind starts from.
+#[test]
+fn every_kind_solves_its_defining_equation() {
+    let mesh = common::blob(2);
+    let ops = Operators::new(&mesh).unwrap();
+    let (l, m) = (&ops.laplacian, &ops.mass);
+    let (ns, ch, seed) = (3, 2, 77);
+    let naive = NoiseSampler::new(&mesh, NoiseKind::Naive)
+        .unwrap()
+        .sample(ns, ch, seed)
+        .unwrap();
+    for s in 0..ns {
+        for c in 0..ch {
+            let n = naive.signal(s, c);
+            // white: M^-1/2 n
+            let w = NoiseSampler::new(&mesh, NoiseKind::White)
+                .unwrap()
+                .sample(ns, ch, seed)
+                .unwrap();
+            for ((x, n), m) in w.signal(s, c).iter().zip(&n).zip(m) {
+                assert!((x * m.sqrt() - n).abs() <= 1e-14 * n.abs().max(1.0));
+            }
+            // matern: (L + tau M) f = M^1/2 n
+            let tau = 7.5;
+            let f = NoiseSampler::new(&mesh, NoiseKind::Matern { tau }).unwrap();
+            let f = f.sample(ns, ch, seed).unwrap().signal(s, c);
+            let lf = matvec(l, &f);
+            let r: Vec<f64> = (0..f.len())
+                .map(|v| lf[v] + tau * m[v] * f[v] - m[v].sqrt() * n[v])
+                .collect();
+            let rhs: Vec<f64> = (0..f.len()).map(|v| m[v].sqrt() * n[v]).collect();
+            assert!(
+                norm(&r) < 1e-12 * norm(&rhs),
+                "matern residual {}",
+                norm(&r)
+            );
+            // normalized: g = sqrt(Gamma) f with (L + c Gamma M) f = M^1/2 n
+            let cc = 2e-3;
+            let ns_ = NoiseSampler::new(&mesh, NoiseKind::MaternNormalized { c: cc }).unwrap();
+            let gamma = ns_.gamma();
+            assert_eq!(ns_.tau(), Some(cc * gamma));
+            assert_eq!(ns_.amplitude(), gamma.sqrt());
+            let g = ns_.sample(ns, ch, seed).unwrap().signal(s, c);
+            let f: Vec<f64> = g.iter().map(|x| x / gamma.sqrt()).collect();
+            let lf = matvec(l, &f);
+            let r: Vec<f64> = (0..f.len())
+                .map(|v| lf[v] + cc * gamma * m[v] * f[v] - m[v].sqrt() * n[v])
+                .collect();
+            assert!(
+                norm(&r) < 1e-12 * norm(&rhs),
+                "normalized residual {}",
+                norm(&r)
+            );
+        }
+    }
+}
+
+/// Explicit noise draws `chi` as the first `k` normals of the stream, so its
+/// coefficients are `n_i / (lambda_i + tau)` with `n` the naive sample.
+#[test]
+fn explicit_coefficients_are_scaled_normals() {
+    let mesh = common::blob(2);
+    let (k, tau) = (12, 3.0);
+    let ex = NoiseSampler::new(&mesh, NoiseKind::Explicit { k, tau }).unwrap();
+    let naive = NoiseSampler::new(&mesh, NoiseKind::Naive)
+        .unwrap()
+        .sample(4, 1, 8)
+        .unwrap();
+    let batch = ex.sample(4, 1, 8).unwrap();
+    let pairs = ex.eigenpairs().unwrap();
+    for s in 0..4 {
+        let c = spectrum::project(pairs, ex.mass(), &batch.signal(s, 0)).unwrap();
+        for i in 0..k {
+            let want = naive.get(s, i, 0) / (pairs.values[i] + tau);
+            assert!(
+                (c[i] - want).abs() < 1e-12 * want.abs().max(1e-3),
+                "c_{i}: {} vs {want}",
+                c[i]
+            );
+        }
+    }
+}
+
+/// Signals with known coefficients: the analyzer's variance, mean, energy
+/// and correlation are the exact sample statistics of those coefficients.
+#[test]
+fn analyzer_recovers_known_coefficients() {
+    let mesh = common::blob(2);
+    let (mass, pairs) = common::eigen(&mesh, 6);
+    let v = mesh.num_vertices();
+    // 3 samples x 2 channels; signal j has coefficients a[j]
+    let a: Vec<[f64; 6]> = (0..6)
+        .map(|j| std::array::from_fn(|i| ((j * 7 + i * 3) % 5) as f64 - 2.0 + 0.1 * i as f64))
+        .collect();
+    let mut data = vec![0.0; 3 * v * 2];
+    for (j, coef) in a.iter().enumerate() {
+        let (s, c) = (j / 2, j % 2);
+        for vv in 0..v {
+            data[(s * v + vv) * 2 + c] = (0..6).map(|i| coef[i] * pairs.vectors[(vv, i)]).sum();
+        }
+    }
+    let batch = NoiseBatch::from_vec(data, 3, v, 2).unwrap();
+    let mut an = SpectralAnalyzer::new(&pairs, &mass)
+        .unwrap()
+        .keep(&[1, 4, 99]);
+    an.add(&batch).unwrap();
+    let r = an.report(None).unwrap();
+    assert_eq!(r.num_signals, 6);
+    for i in 0..6 {
+        let var = a.iter().map(|c| c[i] * c[i]).sum::<f64>() / 6.0;
+        let mean = a.iter().map(|c| c[i]).sum::<f64>() / 6.0;
+        assert!((r.variance[i] - var).abs() < 1e-10, "var {i}");
+        assert!((r.mean[i] - mean).abs() < 1e-10, "mean {i}");
+    }
+    let energy = a
+        .iter()
+        .map(|c| c.iter().map(|x| x * x).sum::<f64>())
+        .sum::<f64>()
+        / 6.0;
+    assert!((r.mean_energy - energy).abs() < 1e-10 * energy);
+    assert!((r.captured_energy - energy).abs() < 1e-10 * energy);
+    let kept: Vec<f64> = a.iter().map(|c| c[4]).collect();
+    let got = an.coefficients(4).unwrap();
+    assert!(got.iter().zip(&kept).all(|(x, y)| (x - y).abs() < 1e-10));
+    assert!(an.coefficients(99).is_none() && an.coefficients(2).is_none());
+    // correlation of frequencies 0 and 1 from the definitions
+    let (s01, s00, s11) = a.iter().fold((0.0, 0.0, 0.0), |(x, y, z), c| {
+        (x + c[0] * c[1], y + c[0] * c[0], z + c[1] * c[1])
+    });
+    let r01 = (s01 / (s00 * s11).sqrt()).abs();
+    assert!(r.independence.max_abs_correlation >= r01 - 1e-12);
+    assert_eq!(r.independence.pairs, 15);
+    // JSON round trip
+    let json = serde_json::to_string(&r).unwrap();
+    let back: SpectrumReport = serde_json::from_str(&json).unwrap();
+    assert_eq!(back.variance.len(), 6);
+    assert!((back.mean_energy - r.mean_energy).abs() <= 1e-15 * r.mean_energy);
+}
+
+#[test]
+fn naive_theory_is_phi_m2_phi_and_white_is_one() {
+    let mesh = common::blob(2);
+    let (mass, pairs) = common::eigen(&mesh, 5);
+    let naive = spectrum::theoretical_variance(NoiseKind::Naive, &pairs, &mass, 1.0).unwrap();
+    for i in 0..5 {
+        let want: f64 = (0..mass.len())
+            .map(|v| (pairs.vectors[(v, i)] * mass[v]).powi(2))
+            .sum();
+        assert!((naive[i] - want).abs() < 1e-14 * want);
+    }
+    let white = spectrum::theoretical_variance(NoiseKind::White, &pairs, &mass, 1.0).unwrap();
+    assert_eq!(white, vec![1.0; 5]);
+    let g = 3.0;
+    let nm =
+        spectrum::theoretical_variance(NoiseKind::MaternNormalized { c: 0.5 }, &pairs, &mass, g)
+            .unwrap();
+    assert!((nm[2] - g / (pairs.values[2] + 1.5).powi(2)).abs() < 1e-15);
+}
+
+#[test]
+fn plots_are_written() {
+    let mesh = common::blob(2);
+    let (mass, pairs) = common::eigen(&mesh, 30);
+    let dir = tempfile::tempdir().unwrap();
+    let mut series = Vec::new();
+    let mut panels = vec![
+        HistogramPanel {
+            title: "c_2".into(),
+            series: vec![],
+            bins: 30,
+        },
+        HistogramPanel {
+            title: "c_20".into(),
+            series: vec![],
+            bins: 30,
+        },
+    ];
+    for (j, kind) in [NoiseKind::Matern { tau: 10.0 }, NoiseKind::White]
+        .into_iter()
+        .enumerate()
+    {
+        let s = NoiseSampler::new(&mesh, kind).unwrap();
+        let th = s.theory(&pairs).unwrap();
+        let mut an = SpectralAnalyzer::new(&pairs, &mass).unwrap().keep(&[2, 20]);
+        an.add(&s.sample(300, 1, j as u64).unwrap()).unwrap();
+        series.push(VarianceSeries::from_report(
+            kind.to_string(),
+            &an.report(Some(&th)).unwrap(),
+        ));
+        panels[0]
+            .series
+            .push((kind.to_string(), an.coefficients(2).unwrap().to_vec()));
+        panels[1]
+            .series
+            .push((kind.to_string(), an.coefficients(20).unwrap().to_vec()));
+    }
+    let p1 = dir.path().join("variance.png");
+    variance_plot(&p1, "Var(c_i)", &series).unwrap();
+    let img = image::open(&p1).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), mfm_noise::plots::VARIANCE_PLOT_SIZE);
+    // the first two palette colours (the two series) are both drawn
+    let has = |img: &image::RgbImage, rgb: [u8; 3]| img.pixels().any(|p| p.0 == rgb);
+    assert!(has(&img, [31, 119, 180]) && has(&img, [214, 39, 40]));
+    // and black text/axes
+    assert!(img.pixels().filter(|p| p.0 == [0, 0, 0]).count() > 500);
+
+    let p2 = dir.path().join("hist.png");
+    coefficient_histograms(&p2, &panels).unwrap();
+    let img = image::open(&p2).unwrap().to_rgb8();
+    let (w, h) = mfm_noise::plots::HISTOGRAM_PANEL_SIZE;
+    assert_eq!(img.dimensions(), (2 * w, h));
+    assert!(has(&img, [31, 119, 180]) && has(&img, [214, 39, 40]));
+
+    assert!(matches!(
+        coefficient_histograms(&p2, &[]),
+        Err(NoiseError::Plot { .. })
+    ));
+    let bad = VarianceSeries {
+        label: "x".into(),
+        eigenvalues: vec![1.0],
+        variance: vec![],
+        theory: None,
+    };
+    assert!(matches!(
+        variance_plot(&p1, "t", &[bad]),
+        Err(NoiseError::Plot { .. })
+    ));
+}
+
+#[test]
+fn errors_name_the_problem() {
+    let mesh = common::blob(1);
+    for (kind, name) in [
+        (NoiseKind::Matern { tau: 0.0 }, "tau"),
+        (NoiseKind::Matern { tau: f64::NAN }, "tau"),
+        (NoiseKind::MaternNormalized { c: -1.0 }, "c"),
+        (NoiseKind::Explicit { k: 0, tau: 1.0 }, "k"),
+        (NoiseKind::Explicit { k: 3, tau: -1.0 }, "tau"),
+    ] {
+        match NoiseSampler::new(&mesh, kind) {
+            Err(NoiseError::InvalidParameter { name: n, .. }) => assert_eq!(n, name),
+            other => panic!("{kind:?}: {other:?}"),
+        }
+    }
+    // more eigenpairs than vertices
+    let e = NoiseSampler::new(&mesh, NoiseKind::Explicit { k: 1000, tau: 1.0 }).unwrap_err();
+    assert!(matches!(e, NoiseError::Solver(_)), "{e}");
+    // an unreferenced vertex has zero mass
+    let (mut p, f) = mesh.clone().into_parts();
+    p.push([5.0, 5.0, 5.0]);
+    let lonely = TriMesh::new(p, f).unwrap();
+    let e = NoiseSampler::new(&lonely, NoiseKind::White).unwrap_err();
+    assert!(
+        matches!(e, NoiseError::NonPositiveMass { vertex: 42, .. }),
+        "{e}"
+    );
+    // mass of the wrong length
+    let ops = Operators::new(&mesh).unwrap();
+    let e =
+        NoiseSampler::from_operators(&ops.laplacian, &ops.mass[1..], NoiseKind::White).unwrap_err();
+    assert!(matches!(e, NoiseError::SizeMismatch { .. }), "{e}");
+    let s = NoiseSampler::from_operators(&ops.laplacian, &ops.mass, NoiseKind::White).unwrap();
+    assert!(matches!(
+        s.sample(1, 0, 0),
+        Err(NoiseError::InvalidParameter {
+            name: "channels",
+            ..
+        })
+    ));
+    assert_eq!(s.sample(0, 2, 0).unwrap().data().len(), 0);
+    assert!(matches!(
+        NoiseBatch::from_vec(vec![0.0; 5], 1, 2, 2),
+        Err(NoiseError::SizeMismatch { .. })
+    ));
+    let (mass, pairs) = common::eigen(&mesh, 4);
+    assert!(SpectralAnalyzer::new(&pairs, &mass[1..]).is_err());
+    assert!(
+        SpectralAnalyzer::new(&pairs, &mass)
+            .unwrap()
+            .report(None)
+            .is_err()
+    );
+    for bad in [
+        "",
+        "pink",
+        "matern:x",
+        "matern:1:2",
+        "normalized",
+        "explicit:-3",
+        "explicit:4:0:1",
+        "white:3",
+    ] {
+        assert!(
+            matches!(bad.parse::<NoiseKind>(), Err(NoiseError::ParseKind { .. })),
+            "{bad:?}"
+        );
+    }
+    assert!(matches!(
+        "matern:0".parse::<NoiseKind>(),
+        Err(NoiseError::InvalidParameter { .. })
+    ));
+}
+
+fn any_kind() -> impl Strategy<Value = NoiseKind> {
+    prop_oneof![
+        Just(NoiseKind::Naive),
+        Just(NoiseKind::White),
+        (1e-6f64..1e6).prop_map(|tau| NoiseKind::Matern { tau }),
+        (1e-9f64..1e3).prop_map(|c| NoiseKind::MaternNormalized { c }),
+        (1usize..5000, prop_oneof![Just(0.0), 1e-6f64..1e6])
+            .prop_map(|(k, tau)| NoiseKind::Explicit { k, tau }),
+    ]
+}
+
+proptest! {
+    #[test]
+    fn kinds_round_trip_through_text_and_json(kind in any_kind()) {
+        prop_assert_eq!(kind.to_string().parse::<NoiseKind>().unwrap(), kind);
+        let json = serde_json::to_string(&kind).unwrap();
+        prop_assert_eq!(serde_json::from_str::<NoiseKind>(&json).unwrap(), kind);
+        let tag = format!("\"kind\":\"{}\"", kind.name().replace('-', "_"));
+        prop_assert!(json.contains(&tag), "{} lacks {}", json, tag);
+    }
+}
