@@ -63,6 +63,59 @@ pub enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Sample noise on a mesh: OUT.npy [samples, vertices, channels] (f64),
+    /// OUT.json (parameters, Gamma, mean energy) and optionally a PNG of the
+    /// first sample.
+    Noise {
+        /// Mesh file or builtin:NAME.
+        mesh: String,
+        #[command(flatten)]
+        kind: crate::spectral::KindArgs,
+        /// Number of samples.
+        #[arg(long, default_value_t = 1)]
+        samples: usize,
+        /// Channels per sample (e.g. 3 for xyz).
+        #[arg(long, default_value_t = 1)]
+        channels: usize,
+        /// Seed: the same seed gives bit-identical samples on any thread count.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Output .npy file.
+        #[arg(long)]
+        out: PathBuf,
+        /// Render the first sample's first channel to this PNG.
+        #[arg(long)]
+        png: Option<PathBuf>,
+    },
+    /// Spectral statistics of noise on one or several meshes: per-frequency
+    /// variance against theory, independence, energy, and (from the second
+    /// mesh on) per-frequency W2 against the first mesh.
+    Spectrum {
+        /// Mesh files or builtin:NAME (several triangulations of one surface
+        /// to compare them).
+        #[arg(required = true)]
+        meshes: Vec<String>,
+        #[command(flatten)]
+        kind: crate::spectral::KindArgs,
+        /// Samples per mesh.
+        #[arg(long, default_value_t = 2000)]
+        samples: usize,
+        /// Eigenpairs (frequencies) per mesh.
+        #[arg(long, default_value_t = 64)]
+        k: usize,
+        /// Seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// JSON report.
+        #[arg(long)]
+        out: PathBuf,
+        /// Folder for PNG plots (variance vs eigenvalue, coefficient histograms).
+        #[arg(long)]
+        plots: Option<PathBuf>,
+        /// Frequencies whose coefficient histograms are plotted.
+        #[arg(long, value_delimiter = ',', default_value = "2,10,50")]
+        coefficients: Vec<usize>,
+    },
 }
 
 /// Per-vertex quantities `mfm render --scalar` can show.
@@ -92,6 +145,34 @@ pub fn run(cmd: Command) -> Result<()> {
             size,
         } => render_png(&mesh, &out, scalar, scalars.as_deref(), size),
         Command::Eigs { mesh, k, out } => crate::spectral::eigs(&mesh, k, &out),
+        Command::Noise {
+            mesh,
+            kind,
+            samples,
+            channels,
+            seed,
+            out,
+            png,
+        } => crate::spectral::noise(&mesh, &kind, samples, channels, seed, &out, png.as_deref()),
+        Command::Spectrum {
+            meshes,
+            kind,
+            samples,
+            k,
+            seed,
+            out,
+            plots,
+            coefficients,
+        } => crate::spectral::spectrum(&crate::spectral::SpectrumArgs {
+            meshes: &meshes,
+            kind: kind.to_kind()?,
+            samples,
+            k,
+            seed,
+            out: &out,
+            plots: plots.as_deref(),
+            coefficients: &coefficients,
+        }),
     }
 }
 

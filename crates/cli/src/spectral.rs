@@ -1,9 +1,18 @@
-//! `mfm eigs`: eigenpairs of a mesh's Laplacian.
+//! `mfm eigs`, `mfm noise`, `mfm spectrum`: eigenpairs, noise samples and
+//! their spectral statistics.
 
 use crate::mesh_arg::load_mesh;
 use crate::output::{write_json, write_npy};
 use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressStyle};
 use mfm_geometry::operators::Operators;
+use mfm_geometry::render::{ColorRange, Colormap, RenderOptions, render_mesh, save_png};
+use mfm_noise::plots::{self, HistogramPanel, VarianceSeries};
+use mfm_noise::spectrum::compare;
+use mfm_noise::{
+    DEFAULT_TAU, NoiseBatch, NoiseKind, NoiseSampler, SpectralAnalyzer, SpectrumComparison,
+    SpectrumReport,
+};
 use mfm_solver::{EigenOptions, generalized_eigenpairs};
 use std::path::Path;
 use std::time::Instant;
@@ -70,5 +79,375 @@ eigenvalues ascending; eigenvectors are the columns of the [V, k] array, phi^T M
         pairs.values[k - 1],
         out.display()
     );
+    Ok(())
+}
+
+/// The noise kinds of `mfm noise --kind` (parameters come from `--tau`,
+/// `--c` and `--k`).
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum KindName {
+    /// Matérn: solve `(L + tau M) f = M^1/2 n` (uses `--tau`).
+    Matern,
+    /// Scale-normalized Matérn: `tau = c Gamma`, output times `sqrt(Gamma)` (uses `--c`).
+    MaternNormalized,
+    /// Discrete white noise `M^-1/2 n`.
+    White,
+    /// iid `N(0, 1)` per vertex (mesh dependent; a baseline).
+    Naive,
+    /// Matérn spectrum truncated to the `k` lowest eigenpairs (uses `--k`, `--tau`).
+    Explicit,
+}
+
+/// Noise parameters shared by `mfm noise` and `mfm spectrum`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct KindArgs {
+    /// Noise kind.
+    #[arg(long, value_enum, default_value = "matern")]
+    pub kind: KindName,
+    /// Screening weight of matern and explicit (1/length^2; default 100).
+    #[arg(long)]
+    pub tau: Option<f64>,
+    /// Dimensionless factor of matern-normalized (tau = c Gamma; default 1e-4).
+    #[arg(long)]
+    pub c: Option<f64>,
+    /// Number of eigenpairs of explicit noise (default 64).
+    #[arg(long = "k-noise", value_name = "K")]
+    pub k_noise: Option<usize>,
+}
+
+impl KindArgs {
+    /// The [`NoiseKind`] these flags describe; flags that the kind does not
+    /// use are an error rather than silently ignored.
+    pub fn to_kind(&self) -> Result<NoiseKind> {
+        let unused = |flag: &str| -> Result<NoiseKind> {
+            let name = clap::ValueEnum::to_possible_value(&self.kind)
+                .map(|v| v.get_name().to_owned())
+                .unwrap_or_default();
+            bail!("{flag} does not apply to --kind {name}")
+        };
+        let kind = match self.kind {
+            KindName::Matern => {
+                if self.c.is_some() {
+                    return unused("--c");
+                }
+                if self.k_noise.is_some() {
+                    return unused("--k-noise");
+                }
+                NoiseKind::Matern {
+                    tau: self.tau.unwrap_or(DEFAULT_TAU),
+                }
+            }
+            KindName::MaternNormalized => {
+                if self.tau.is_some() {
+                    return unused("--tau (the normalized kind sets tau = c Gamma; use --c)");
+                }
+                if self.k_noise.is_some() {
+                    return unused("--k-noise");
+                }
+                NoiseKind::MaternNormalized {
+                    c: self.c.unwrap_or(1e-4),
+                }
+            }
+            KindName::White | KindName::Naive => {
+                if self.tau.is_some() {
+                    return unused("--tau");
+                }
+                if self.c.is_some() {
+                    return unused("--c");
+                }
+                if self.k_noise.is_some() {
+                    return unused("--k-noise");
+                }
+                if matches!(self.kind, KindName::White) {
+                    NoiseKind::White
+                } else {
+                    NoiseKind::Naive
+                }
+            }
+            KindName::Explicit => {
+                if self.c.is_some() {
+                    return unused("--c");
+                }
+                NoiseKind::Explicit {
+                    k: self.k_noise.unwrap_or(64),
+                    tau: self.tau.unwrap_or(DEFAULT_TAU),
+                }
+            }
+        };
+        kind.validate()?;
+        Ok(kind)
+    }
+}
+
+/// Samples per chunk when streaming many samples (bounds memory at
+/// `CHUNK * V * C` values).
+const CHUNK: usize = 256;
+
+fn progress(total: u64, what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(total);
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} samples ({eta} left)")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    bar.set_message(what.to_owned());
+    bar
+}
+
+#[derive(serde::Serialize)]
+struct NoiseSummary<'a> {
+    mesh: &'a str,
+    kind: NoiseKind,
+    samples: usize,
+    vertices: usize,
+    channels: usize,
+    seed: u64,
+    gamma: f64,
+    tau: Option<f64>,
+    layout: &'static str,
+    mean_energy: f64,
+}
+
+/// `mfm noise`: writes `[N, V, C]` noise samples as `.npy` (f64), a JSON
+/// summary beside it, and optionally a PNG of the first sample's first channel.
+pub fn noise(
+    spec: &str,
+    kind: &KindArgs,
+    samples: usize,
+    channels: usize,
+    seed: u64,
+    out: &Path,
+    png: Option<&Path>,
+) -> Result<()> {
+    if samples == 0 || channels == 0 {
+        bail!("--samples and --channels must be at least 1");
+    }
+    let kind = kind.to_kind()?;
+    let mesh = load_mesh(spec)?;
+    let v = mesh.num_vertices();
+    let values = samples
+        .checked_mul(v)
+        .and_then(|x| x.checked_mul(channels))
+        .filter(|&x| x <= 1 << 31)
+        .with_context(|| {
+            format!(
+                "{samples} samples x {v} vertices x {channels} channels is too large for one file"
+            )
+        })?;
+    let start = Instant::now();
+    let sampler = NoiseSampler::new(&mesh, kind)
+        .with_context(|| format!("{spec}: cannot set up {kind} noise"))?;
+    let setup = start.elapsed().as_secs_f64();
+    let mut data = Vec::with_capacity(values);
+    let bar = progress(samples as u64, "sampling");
+    let mut first = 0;
+    while first < samples {
+        let count = CHUNK.min(samples - first);
+        let batch = sampler.sample_range(first, count, channels, seed)?;
+        data.extend_from_slice(batch.data());
+        first += count;
+        bar.set_position(first as u64);
+    }
+    bar.finish_and_clear();
+    let batch = NoiseBatch::from_vec(data, samples, v, channels)?;
+    let mass = sampler.mass();
+    let mut energy = 0.0;
+    for s in 0..samples {
+        for c in 0..channels {
+            let f = batch.signal(s, c);
+            energy += f.iter().zip(mass).map(|(x, m)| m * x * x).sum::<f64>();
+        }
+    }
+    let mean_energy = energy / (samples * channels) as f64;
+    write_npy(
+        out,
+        batch.data(),
+        &[samples as u64, v as u64, channels as u64],
+    )?;
+    let summary = NoiseSummary {
+        mesh: spec,
+        kind,
+        samples,
+        vertices: v,
+        channels,
+        seed,
+        gamma: sampler.gamma(),
+        tau: sampler.tau(),
+        layout: "[samples, vertices, channels], row-major f64",
+        mean_energy,
+    };
+    let json = out.with_extension("json");
+    write_json(&json, &summary)?;
+    println!(
+        "{samples} x {channels} {kind} samples on {spec} ({v} vertices; setup {setup:.3} s, total {:.3} s); \
+mean f^T M f = {mean_energy:.4e}; wrote {} and {}",
+        start.elapsed().as_secs_f64(),
+        out.display(),
+        json.display()
+    );
+    if let Some(png) = png {
+        let opts = RenderOptions {
+            width: 800,
+            height: 800,
+            colorbar: true,
+            colormap: Colormap::CoolWarm,
+            range: ColorRange::Symmetric,
+            ..Default::default()
+        };
+        let img = render_mesh(&mesh, Some(&batch.signal(0, 0)), &opts)?;
+        save_png(&img, png)?;
+        println!("wrote {}", png.display());
+    }
+    Ok(())
+}
+
+#[derive(serde::Serialize)]
+struct MeshSpectrum {
+    mesh: String,
+    vertices: usize,
+    gamma: f64,
+    report: SpectrumReport,
+}
+
+#[derive(serde::Serialize)]
+struct SpectrumFile {
+    kind: NoiseKind,
+    samples: usize,
+    k: usize,
+    seed: u64,
+    meshes: Vec<MeshSpectrum>,
+    /// Each later mesh against the first, frequency by frequency.
+    comparisons: Vec<SpectrumComparison>,
+}
+
+/// Options of `mfm spectrum`.
+pub struct SpectrumArgs<'a> {
+    /// Mesh specs (files or builtins), at least one.
+    pub meshes: &'a [String],
+    /// Noise kind.
+    pub kind: NoiseKind,
+    /// Samples per mesh.
+    pub samples: usize,
+    /// Eigenpairs per mesh.
+    pub k: usize,
+    /// Seed.
+    pub seed: u64,
+    /// Report path.
+    pub out: &'a Path,
+    /// Folder for PNG plots.
+    pub plots: Option<&'a Path>,
+    /// Frequencies whose coefficient histograms are plotted.
+    pub coefficients: &'a [usize],
+}
+
+/// `mfm spectrum`: per-frequency statistics of noise on one or several
+/// meshes, as JSON (and PNG plots).
+pub fn spectrum(args: &SpectrumArgs<'_>) -> Result<()> {
+    if args.meshes.is_empty() {
+        bail!("give at least one mesh");
+    }
+    if args.samples < 2 || args.k == 0 {
+        bail!("--samples must be at least 2 and --k at least 1");
+    }
+    let mut meshes = Vec::new();
+    let mut series = Vec::new();
+    let mut histograms: Vec<Vec<(String, Vec<f64>)>> = vec![Vec::new(); args.coefficients.len()];
+    for spec in args.meshes {
+        let mesh = load_mesh(spec)?;
+        let v = mesh.num_vertices();
+        if args.k > v {
+            bail!("{spec}: --k {} exceeds the vertex count {v}", args.k);
+        }
+        let sampler = NoiseSampler::new(&mesh, args.kind)
+            .with_context(|| format!("{spec}: cannot set up {} noise", args.kind))?;
+        let ops =
+            Operators::new(&mesh).with_context(|| format!("{spec}: cannot build operators"))?;
+        let pairs = mfm_noise::spectrum::eigenpairs(&ops.laplacian, &ops.mass, args.k)
+            .with_context(|| format!("{spec}: eigensolve failed"))?;
+        let theory = sampler.theory(&pairs)?;
+        let mut analyzer = SpectralAnalyzer::new(&pairs, &ops.mass)?.keep(args.coefficients);
+        let bar = progress(args.samples as u64, spec);
+        let mut first = 0;
+        while first < args.samples {
+            let count = CHUNK.min(args.samples - first);
+            analyzer.add(&sampler.sample_range(first, count, 1, args.seed)?)?;
+            first += count;
+            bar.set_position(first as u64);
+        }
+        bar.finish_and_clear();
+        let report = analyzer.report(Some(&theory))?;
+        println!(
+            "{spec}: {v} vertices, {} samples, {} frequencies; largest |Var/theory - 1| = {:.3}; \
+max |corr| = {:.3} (sampling level {:.3}); mean f^T M f = {:.4e}",
+            args.samples,
+            args.k,
+            report.max_relative_error.unwrap_or(f64::NAN),
+            report.independence.max_abs_correlation,
+            report.independence.reference,
+            report.mean_energy
+        );
+        for (slot, &i) in histograms.iter_mut().zip(args.coefficients) {
+            if let Some(c) = analyzer.coefficients(i) {
+                slot.push((spec.clone(), c.to_vec()));
+            }
+        }
+        series.push(VarianceSeries::from_report(spec.clone(), &report));
+        meshes.push(MeshSpectrum {
+            mesh: spec.clone(),
+            vertices: v,
+            gamma: sampler.gamma(),
+            report,
+        });
+    }
+    let comparisons: Vec<SpectrumComparison> = meshes
+        .iter()
+        .skip(1)
+        .map(|m| compare(&meshes[0].report, &m.report))
+        .collect();
+    for (m, c) in meshes.iter().skip(1).zip(&comparisons) {
+        println!(
+            "{} vs {}: max W2 = {:.3e}, max |std ratio - 1| = {:.3}",
+            m.mesh, meshes[0].mesh, c.max_w2, c.max_relative_std_difference
+        );
+    }
+    write_json(
+        args.out,
+        &SpectrumFile {
+            kind: args.kind,
+            samples: args.samples,
+            k: args.k,
+            seed: args.seed,
+            meshes,
+            comparisons,
+        },
+    )?;
+    println!("wrote {}", args.out.display());
+    if let Some(dir) = args.plots {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create folder {}", dir.display()))?;
+        let variance = dir.join("variance.png");
+        plots::variance_plot(
+            &variance,
+            &format!("Var(c_i), {} noise", args.kind),
+            &series,
+        )?;
+        println!("wrote {}", variance.display());
+        let panels: Vec<HistogramPanel> = args
+            .coefficients
+            .iter()
+            .zip(histograms)
+            .filter(|(_, s)| !s.is_empty())
+            .map(|(i, series)| HistogramPanel {
+                title: format!("c_{i}"),
+                series,
+                bins: 40,
+            })
+            .collect();
+        if !panels.is_empty() {
+            let hist = dir.join("coefficients.png");
+            plots::coefficient_histograms(&hist, &panels)?;
+            println!("wrote {}", hist.display());
+        }
+    }
     Ok(())
 }

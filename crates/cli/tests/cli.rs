@@ -242,3 +242,108 @@ fn eigs_match_the_sphere_spectrum_and_are_mass_orthonormal() {
     assert!(!bad.status.success());
     assert!(stderr(&bad).contains("--k"));
 }
+
+#[test]
+fn noise_writes_npy_json_png_and_is_deterministic() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let a = dir.path().join("a.npy");
+    let b = dir.path().join("b.npy");
+    let png = dir.path().join("a.png");
+    let args = |out: &Path| {
+        vec![
+            "noise".to_owned(),
+            "builtin:icosphere:2".to_owned(),
+            "--kind".to_owned(),
+            "matern".to_owned(),
+            "--tau".to_owned(),
+            "10".to_owned(),
+            "--samples".to_owned(),
+            "3".to_owned(),
+            "--channels".to_owned(),
+            "2".to_owned(),
+            "--seed".to_owned(),
+            "5".to_owned(),
+            "--out".to_owned(),
+            out.to_str().expect("utf8").to_owned(),
+        ]
+    };
+    let mut first = args(&a);
+    first.extend(["--png".to_owned(), png.to_str().expect("utf8").to_owned()]);
+    let first: Vec<&str> = first.iter().map(String::as_str).collect();
+    let o = mfm(&first);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let second = args(&b);
+    let second: Vec<&str> = second.iter().map(String::as_str).collect();
+    assert!(mfm(&second).status.success());
+    let bytes = std::fs::read(&a).expect("npy");
+    let npy = npyz::NpyFile::new(&bytes[..]).expect("npy");
+    assert_eq!(npy.shape(), &[3, 162, 2]);
+    let values: Vec<f64> = npy.into_vec().expect("f64");
+    assert!(values.iter().all(|x| x.is_finite()));
+    assert!(values.iter().any(|&x| x != 0.0));
+    // same seed, same bits
+    assert_eq!(values, read_npy(&b));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(a.with_extension("json")).expect("json"))
+            .expect("json");
+    assert_eq!(summary["kind"]["kind"], "matern");
+    assert_eq!(summary["tau"], 10.0);
+    let img = std::fs::read(&png).expect("png");
+    assert_eq!(&img[1..4], b"PNG");
+    // a flag the kind does not use is an error, not silently ignored
+    let o = mfm(&[
+        "noise",
+        "builtin:icosphere:1",
+        "--kind",
+        "white",
+        "--tau",
+        "3",
+        "--out",
+        a.to_str().expect("utf8"),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--tau"), "{}", stderr(&o));
+}
+
+#[test]
+fn spectrum_reports_matern_variance_near_theory_and_compares_meshes() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("spec.json");
+    let plots = dir.path().join("plots");
+    let o = mfm(&[
+        "spectrum",
+        "builtin:icosphere:2",
+        "builtin:icosphere:3",
+        "--tau",
+        "20",
+        "--samples",
+        "1500",
+        "--k",
+        "16",
+        "--out",
+        out.to_str().expect("utf8"),
+        "--plots",
+        plots.to_str().expect("utf8"),
+        "--coefficients",
+        "1,9",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).expect("report")).expect("json");
+    let meshes = v["meshes"].as_array().expect("meshes");
+    assert_eq!(meshes.len(), 2);
+    for m in meshes {
+        // relative sd of a variance from 1500 samples is sqrt(2/1500) = 3.7%;
+        // 16 frequencies stay within 5 sigma
+        let err = m["report"]["max_relative_error"].as_f64().expect("error");
+        assert!(err < 0.185, "{err}");
+    }
+    assert_eq!(v["comparisons"].as_array().expect("comparisons").len(), 1);
+    let rel = v["comparisons"][0]["max_relative_std_difference"]
+        .as_f64()
+        .expect("std diff");
+    assert!(rel < 0.2, "{rel}");
+    for f in ["variance.png", "coefficients.png"] {
+        assert!(plots.join(f).is_file(), "{f}");
+    }
+}
