@@ -177,6 +177,50 @@ fn valid_files(mesh: &mfm_geometry::TriMesh) -> Vec<(MeshFormat, Vec<u8>)> {
     out
 }
 
+/// OBJ statements built to reach the corners of `tobj`'s parser: numbers at
+/// the limits of `isize`, zero and relative indices, corners with up to four
+/// `/` parts, `vt`/`vn` data that faces point into, colors and `w` on
+/// vertices, `l` lines, empty `usemtl`, continuations. Most statements are
+/// valid, so that whole files parse often enough to reach index resolution
+/// (which `tobj` only does at the end of the file).
+fn obj_statement() -> impl Strategy<Value = String> {
+    let number = prop_oneof![
+        12 => prop::sample::select(vec!["1", "2", "3", "-1", "-2", "0.5"]),
+        2 => prop::sample::select(vec![
+            "0",
+            "+2",
+            "-4",
+            "9223372036854775807",
+            "-9223372036854775808",
+            "4294967297",
+        ]),
+        1 => prop::sample::select(vec!["", "x", "nan", "1e999", "1.5", "99999999999999999999"]),
+    ];
+    let corner = prop_oneof![
+        2 => number.clone().prop_map(str::to_owned),
+        3 => prop::collection::vec(number.clone(), 2..4).prop_map(|parts| parts.join("/")),
+        1 => prop::collection::vec(number.clone(), 1..5).prop_map(|parts| parts.join("/")),
+    ];
+    let keyword = prop::sample::select(vec![
+        "v", "v", "v", "f", "f", "f", "vt", "vn", "l", "p", "g", "o", "usemtl", "mtllib", "s", "#",
+    ]);
+    (
+        keyword,
+        prop_oneof![4 => 3usize..4, 1 => 0usize..8],
+        prop::collection::vec(corner, 8),
+        prop::collection::vec(number, 8),
+        prop::sample::select(vec!["\n", "\n", "\r\n", " \\\n", " # c\n"]),
+    )
+        .prop_map(|(k, n, corners, numbers, end)| {
+            let body = if k == "f" || k == "l" {
+                corners[..n].join(" ")
+            } else {
+                numbers[..n].join(" ")
+            };
+            format!("{k} {body}{end}")
+        })
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(256))]
 
@@ -196,6 +240,17 @@ proptest! {
             _ => b"glTF\x02\x00\x00\x00",
         };
         parse_all(&[head, &body].concat());
+    }
+
+    #[test]
+    fn obj_statements_never_panic(
+        head in any::<bool>(),
+        statements in prop::collection::vec(obj_statement(), 0..16),
+    ) {
+        // a valid start, with texture coordinates and normals for faces to
+        // point into (tobj 4.0.5 overflows on `f 1/-4 2 3` after one `vt`)
+        let head = if head { "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n" } else { "" };
+        parse_all(format!("{head}{}", statements.concat()).as_bytes());
     }
 
     /// glTF with arbitrary accessor and view numbers: every combination must be

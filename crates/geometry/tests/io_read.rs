@@ -438,6 +438,191 @@ fn obj_details() {
     ));
 }
 
+/// An OBJ error as `(line, message)`, checking that the message is one line.
+fn obj_syntax_error(text: &[u8]) -> (usize, String) {
+    match parse(text, MeshFormat::Obj) {
+        Err(ReadErrorKind::Syntax { line, message }) => {
+            assert!(!message.contains('\n'), "one line: {message}");
+            (line, message)
+        }
+        other => panic!("expected a syntax error, got {other:?}"),
+    }
+}
+
+#[test]
+fn obj_errors_name_the_line_and_what_is_wrong() {
+    let tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+    // a coordinate that is not a number: the vertex and the statement
+    let (line, message) = obj_syntax_error(b"v 0 0 0\n# two\nv 1 zero 0\n");
+    assert_eq!(line, 3);
+    assert!(
+        message.contains("vertex 1") && message.contains("`v 1 zero 0`"),
+        "{message}"
+    );
+    // a corner that is not `i`, `i/t`, `i//n` or `i/t/n`
+    for (corner, face) in [("2/x", 1), ("2/1/1/1", 1), ("two", 1)] {
+        let text = format!("{tri}f 1 2 3\n\nf 1 {corner} 3\n");
+        let (line, message) = obj_syntax_error(text.as_bytes());
+        assert_eq!(line, 6, "{corner}");
+        assert!(
+            message.contains(&format!("`{corner}`")) && message.contains(&format!("face {face}")),
+            "{message}"
+        );
+    }
+    // a corner with texture and normal indices but no position index
+    let (line, message) = obj_syntax_error(format!("{tri}f 1 //1 3\n").as_bytes());
+    assert_eq!(line, 4);
+    assert!(message.contains("`//1`"), "{message}");
+    // a relative index too large for any integer type
+    let (line, _) = obj_syntax_error(format!("{tri}f 1 2 -99999999999999999999\n").as_bytes());
+    assert_eq!(line, 4);
+    // the line of a continued statement is the line it starts on
+    let (line, message) = obj_syntax_error(format!("{tri}f 1 \\\n 2 \\\n 0\n").as_bytes());
+    assert_eq!(line, 4);
+    assert!(message.contains("start at 1"), "{message}");
+    // an index past the last vertex: the triangle of the fan that holds it
+    // (face 1 is a pentagon (0,1,2,3,4) split into triangles 1, 2, 3; corner 3
+    // first appears in triangle 2)
+    let text = format!("{tri}v 1 1 0\nv 2 2 0\nf 1 2 3\nf 1 2 3 9 4\n");
+    assert!(matches!(
+        parse(text.as_bytes(), MeshFormat::Obj),
+        Err(ReadErrorKind::Mesh(MeshError::IndexOutOfRange {
+            face: 2,
+            index: 8,
+            num_vertices: 5
+        }))
+    ));
+    // faces of zero, one and two corners
+    for (corners, arity) in [("", 0), (" 1", 1), (" 1 2", 2)] {
+        let text = format!("{tri}f{corners}\n");
+        assert!(
+            matches!(
+                parse(text.as_bytes(), MeshFormat::Obj),
+                Err(ReadErrorKind::FaceArity { face: 0, arity: a, line: Some(4) }) if a == arity
+            ),
+            "{corners:?}"
+        );
+    }
+}
+
+#[test]
+fn obj_leniency() {
+    // inline comments, CRLF, tabs, a non-UTF-8 comment, a forward reference,
+    // statements tobj would refuse but that carry nothing we read (a
+    // one-component `vt`, `usemtl` without a name, five numbers on a `v`)
+    let mut text = b"v 0 0 0 # origin\r\nf 1 2 3\r\n# caf\xe9\r\nvt 0.5\r\nusemtl\r\n".to_vec();
+    text.extend_from_slice(b"v\t1 0 0 7 8\r\nv 0 1 0 0\r\n");
+    let m = parse_ok(&text, MeshFormat::Obj);
+    assert_eq!(
+        m.positions(),
+        &[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    );
+    assert_eq!(m.faces(), &[[0, 1, 2]]);
+    // texture indices are not followed (tobj 4.0.5 alone overflows on this
+    // relative `vt` index reaching before the first one)
+    let m = parse_ok(
+        b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/-4 2 3\n",
+        MeshFormat::Obj,
+    );
+    assert_eq!(m.faces(), &[[0, 1, 2]]);
+    // coordinates are parsed as f64, not f32
+    let m = parse_ok(
+        b"v 0.1 1e-300 123456789.12345679\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+        MeshFormat::Obj,
+    );
+    assert_eq!(m.positions()[0], [0.1, 1e-300, 123456789.12345679]);
+}
+
+/// The OBJ text of `mesh` written the awkward ways the reader must undo:
+/// faces spread between the vertices (forward references included), random
+/// relative indices and `/t`, `//n`, `/t/n` corners, groups, objects and
+/// materials between faces, `vt`/`vn`/`l`/`s` statements, `w` and colors on
+/// some vertices, comments, CRLF and `\` continuations.
+fn awkward_obj(mesh: &TriMesh, seed: u64) -> String {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let nv = mesh.num_vertices();
+    // the number of vertices defined before each face, non-decreasing
+    let mut defined: Vec<usize> = (0..mesh.num_faces())
+        .map(|_| rng.random_range(0..=nv))
+        .collect();
+    defined.sort_unstable();
+    let mut out = String::new();
+    let eol = |rng: &mut rand_chacha::ChaCha8Rng, out: &mut String| {
+        out.push_str(if rng.random_bool(0.3) { "\r\n" } else { "\n" });
+    };
+    let mut next_face = 0;
+    for v in 0..=nv {
+        while next_face < defined.len() && defined[next_face] == v {
+            for _ in 0..rng.random_range(0..3) {
+                let filler = [
+                    "g part",
+                    "o thing",
+                    "usemtl stone",
+                    "s 1",
+                    "vt 0.25 0.75",
+                    "vn 0 0 1",
+                    "l 1 2",
+                    "# note",
+                    "",
+                    "mtllib none.mtl",
+                ];
+                out.push_str(filler[rng.random_range(0..filler.len())]);
+                eol(&mut rng, &mut out);
+            }
+            out.push('f');
+            for &i in &mesh.faces()[next_face] {
+                let i = i as usize;
+                let index = if i < v && rng.random_bool(0.5) {
+                    format!("-{}", v - i)
+                } else {
+                    format!("{}", i + 1)
+                };
+                let suffix = ["", "/1", "//1", "/1/1"][rng.random_range(0..4)];
+                out.push_str(if rng.random_bool(0.1) { " \\\n " } else { " " });
+                out.push_str(&index);
+                out.push_str(suffix);
+            }
+            eol(&mut rng, &mut out);
+            next_face += 1;
+        }
+        if let Some(p) = mesh.positions().get(v) {
+            out.push_str(&format!("v {:?} {:?} {:?}", p[0], p[1], p[2]));
+            out.push_str(match rng.random_range(0..5) {
+                0 => " 2.5",
+                1 => " 0.1 0.2 0.3",
+                2 => " # a vertex",
+                _ => "",
+            });
+            eol(&mut rng, &mut out);
+        }
+    }
+    out
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(128))]
+
+    /// Whatever the layout of the file, the mesh read is the one written:
+    /// same vertices in the same order (bit for bit), same triangles.
+    #[test]
+    fn obj_reads_back_in_file_numbering(
+        mesh in io_support::any_mesh(),
+        seed in proptest::prelude::any::<u64>(),
+    ) {
+        let text = awkward_obj(&mesh, seed);
+        let back = match parse(text.as_bytes(), MeshFormat::Obj) {
+            Ok(m) => m,
+            Err(e) => panic!("{e}\n{text}"),
+        };
+        let bits = |m: &TriMesh| -> Vec<u64> {
+            m.positions().iter().flatten().map(|x| x.to_bits()).collect()
+        };
+        proptest::prop_assert_eq!(bits(&back), bits(&mesh));
+        proptest::prop_assert_eq!(back.faces(), mesh.faces());
+    }
+}
+
 fn ply_header(format: &str, vertex_props: &str, nv: usize, face_props: &str, nf: usize) -> String {
     format!(
         "ply\nformat {format} 1.0\ncomment test\nobj_info x\nelement vertex {nv}\n{vertex_props}element face {nf}\n{face_props}end_header\n"

@@ -8,7 +8,7 @@
 //! ## Formats read
 //! | extension | parser | notes |
 //! |---|---|---|
-//! | `.obj` | hand-written | `v` and `f` lines; everything else is skipped |
+//! | `.obj` | `tobj` crate | `v` and `f` statements; everything else is skipped |
 //! | `.off` | hand-written | `OFF` header (also `C`/`N`/`ST` variants), `#` comments |
 //! | `.ply` | hand-written | ASCII, binary little and big endian |
 //! | `.gltf`, `.glb` | `gltf` crate | all triangle primitives of all meshes |
@@ -22,11 +22,15 @@
 //! [`crate::validate::MeshReport`] will then show). Faces with fewer than three
 //! corners are an error ([`ReadErrorKind::FaceArity`]).
 //!
-//! OBJ is read by a hand-written parser rather than `tobj`: `tobj` renumbers
-//! vertices in order of first use, drops vertices no face uses, splits
-//! vertices shared between groups (`g`/`o`/`usemtl`) and parses single
-//! precision by default, all of which break the "same vertices as the file"
-//! promise above.
+//! OBJ is parsed by `tobj` (with `f64` coordinates) behind a thin layer
+//! that keeps the promises above, which `tobj` alone does not: it would
+//! renumber vertices in order of first use, drop vertices no face uses, split
+//! the file into one model per `o`/`g`/`usemtl`, and silently turn faces with
+//! one or two corners into zero-area triangles. All objects and groups are
+//! merged into one mesh; `w` and vertex colors after `x y z` are ignored; `#`
+//! comments may end any line and a trailing `\` continues a statement.
+//! Errors carry the line of the statement at fault (`tobj`'s own errors have
+//! no position; see the `obj` module source for how they are placed).
 //!
 //! glTF: positions are taken in each mesh's own frame: node transforms are
 //! **not** applied, and a mesh used by several nodes is read once. Primitives
