@@ -7,9 +7,15 @@
 //! - `lint`: `cargo fmt --check` and `cargo clippy --all-targets -D warnings`.
 //! - `demo`: the main job on a built-in default.
 //! - `bench operators`: operator assembly times, ours and libigl's, in one run.
+//! - `bench noise`: Matérn sampling, ours against CHOLMOD and cholespy, in one run.
+//! - `reproduce-figures spectral`: the paper's noise figures (per-frequency
+//!   statistics, spectrum, fixed vs normalized tau, noise on a non-uniform
+//!   triangulation) and the numbers behind them, from scratch.
 
 mod bench;
+mod bench_noise;
 mod demo;
+mod figures;
 mod pyenv;
 
 use anyhow::{Context, Result, bail};
@@ -45,6 +51,16 @@ enum Cmd {
     /// Benchmarks against the Python reference stack, in one run.
     #[command(subcommand)]
     Bench(BenchCmd),
+    /// Regenerate the paper's figures (PNGs plus the numbers behind them).
+    #[command(subcommand)]
+    ReproduceFigures(FiguresCmd),
+}
+
+#[derive(Subcommand)]
+enum FiguresCmd {
+    /// Noise figures of paper section 3: per-frequency statistics, spectrum,
+    /// fixed vs normalized tau, noise on a non-uniform triangulation.
+    Spectral(figures::SpectralArgs),
 }
 
 #[derive(Subcommand)]
@@ -60,6 +76,26 @@ enum BenchCmd {
         /// Timed runs per operator (the median is reported).
         #[arg(long, default_value_t = 9)]
         runs: u32,
+    },
+    /// Matérn noise: factorization and batch sampling, CHOLMOD (scikit-sparse)
+    /// and cholespy vs mfm-noise on the same arrays. Installs the Python peers
+    /// into their own cached environment on first use.
+    Noise {
+        /// Mesh file to time (and its midpoint subdivisions).
+        #[arg(long, default_value = "../shared/meshes/bunny.off")]
+        mesh: PathBuf,
+        /// Comma-separated subdivision levels (each multiplies the faces by 4).
+        #[arg(long, default_value = "0,1,2,3,4")]
+        levels: String,
+        /// Samples per batch (one solve with this many right-hand sides).
+        #[arg(long, default_value_t = 64)]
+        batch: usize,
+        /// Screening weight tau of L + tau M.
+        #[arg(long, default_value_t = 100.0)]
+        tau: f64,
+        /// Timed runs per measurement (the median is reported).
+        #[arg(long, default_value_t = 3)]
+        runs: usize,
     },
 }
 
@@ -144,5 +180,26 @@ fn main() -> Result<()> {
             };
             bench::operators(&env, &mesh, &levels, runs)
         }
+        Cmd::Bench(BenchCmd::Noise {
+            mesh,
+            levels,
+            batch,
+            tau,
+            runs,
+        }) => {
+            let mesh = if mesh.is_relative() {
+                root().join(mesh)
+            } else {
+                mesh
+            };
+            bench_noise::noise(&bench_noise::NoiseBench {
+                mesh: &mesh,
+                levels: &levels,
+                batch,
+                tau,
+                runs,
+            })
+        }
+        Cmd::ReproduceFigures(FiguresCmd::Spectral(args)) => figures::spectral(&args),
     }
 }
