@@ -1,9 +1,96 @@
 //! # mfm-net
 //!
-//! PoissonNet on libtorch through `tch` (the network itself lands with the
-//! PoissonNet issue). This crate links the libtorch 2.13 shared libraries of
-//! the project's Python environment (see `cargo xtask setup`); its build
-//! script embeds an rpath so binaries run without `LD_LIBRARY_PATH`.
-//! [`runtime`] reports what the linked libtorch provides.
+//! PoissonNet (the paper's denoiser, DESIGN.md section 5) on libtorch
+//! through `tch`: a differentiable Poisson solve, mesh operators as
+//! differentiable tensor operations, the network with its NJF and linear
+//! heads, safetensors checkpoints, and a training-step benchmark.
+//!
+//! This crate links the libtorch 2.13 shared libraries of the project's
+//! Python environment (see `cargo xtask setup`); its build script embeds an
+//! rpath so binaries run without `LD_LIBRARY_PATH`, and compiles a small C++
+//! shim that makes Rust operations autograd nodes ([`autograd`]).
+//!
+//! ## Modules
+//! - [`autograd`]: custom autograd operations in Rust ([`autograd::apply_custom`],
+//!   [`autograd::apply_linear`]); why a C++ shim instead of splitting graphs.
+//! - [`mesh`]: [`MeshTensors`], one mesh's `G`, `G^T`, face means, mass
+//!   means and the cached Cholesky factor of `L + eps I` as differentiable ops.
+//! - [`model`]: [`PoissonNet`] and its layers; [`config`]: [`PoissonNetConfig`]
+//!   with the presets `paper`, `medium`, `small`.
+//! - [`dense`]: `linear` layers with faer's matrix products.
+//! - [`fused`]: fused CPU kernels for the modulation and the magnitude
+//!   nonlinearity (with their torch reference implementations).
+//! - [`loss`]: mass- and area-weighted MSE, the flow-matching loss.
+//! - [`mod@bench`]: [`bench::bench_training_step`] (what `mfm net bench` runs);
+//!   [`profile`]: per-section timers.
+//! - [`runtime`]: what the linked libtorch offers (threads, CUDA).
+//!
+//! ## Devices and element types
+//! Everything runs on the CPU; with a CUDA libtorch and a GPU the network and
+//! its tensors can live on the GPU ([`runtime::TorchRuntime::preferred_device`])
+//! while the sparse solves stay on the CPU (tensors move for each solve).
+//! Parameters are `f32` by default; [`PoissonNet::set_kind`] switches to `f64`
+//! (solves then use the `f64` factor).
+//!
+//! ## CPU performance
+//! A training step is dominated by dense products (the complex layers alone
+//! are ~70% of the ~537 GFLOP of a paper-preset step at batch 8 on the
+//! 3.5k-vertex bunny), then by memory-bound elementwise work on the face
+//! features, then by the sparse solves. What this crate does about it:
+//! - dense layers use faer's GEMM ([`dense`]), ~15-25% faster per core than
+//!   the MKL inside the torch wheel on the AMD benchmark machine;
+//! - the modulation and the magnitude nonlinearity are single-pass fused
+//!   kernels in `f32` ([`fused`]), 2-3x less time than the torch graph;
+//! - `G`, `G^T A2`, face means are gather kernels ([`mesh`]); the first
+//!   modulation layer runs on vertices (exact rewrite, see [`model`]);
+//! - Rust kernels run on libtorch's own intra-op threads
+//!   ([`autograd::parallel_for`]).
+//!
+//! Two process settings matter a lot and are the caller's choice:
+//! - [`runtime::tune_allocator`]: without it glibc returns every large
+//!   activation to the kernel and each step pays page faults for all of them
+//!   (measured: 7x slower elementwise products). [`bench::bench_training_step`]
+//!   calls it; training binaries should too, once at start-up.
+//! - libtorch's OpenMP workers busy-wait between parallel regions. On a
+//!   machine shared with other busy processes that makes multi-threaded runs
+//!   several times slower; start such runs with `OMP_WAIT_POLICY=PASSIVE` in
+//!   the environment (it is read when libtorch loads, so it cannot be set from
+//!   inside the process), or use one thread (`tch::set_num_threads(1)`), as
+//!   the tests do for tiny meshes.
+//!
+//! ## Example
+//! ```
+//! use mfm_geometry::procedural;
+//! use mfm_net::{MeshTensors, PoissonNet, PoissonNetConfig, loss};
+//! use tch::{Device, Kind, Tensor};
+//!
+//! let mesh = procedural::icosphere(2);
+//! let mt = MeshTensors::new(&mesh).unwrap();
+//! let cfg = PoissonNetConfig { width: 8, blocks: 1, ..PoissonNetConfig::small() };
+//! let net = PoissonNet::new(&cfg, Device::Cpu).unwrap();
+//! let v = mt.num_vertices() as i64;
+//! let x = Tensor::randn([4, v, 3], (Kind::Float, Device::Cpu));
+//! let cond = Tensor::randn([4, v, 4], (Kind::Float, Device::Cpu));
+//! let out = net.forward(&mt, &x, Some(&cond)).unwrap();
+//! let target = Tensor::zeros([4, v, 3], (Kind::Float, Device::Cpu));
+//! let l = loss::flow_matching_loss(&mt, &out, &target).unwrap();
+//! l.backward(); // through both Poisson solves of the forward pass
+//! ```
 
+pub mod autograd;
+pub mod bench;
+pub mod config;
+pub mod dense;
+pub mod error;
+mod fastmath;
+pub mod fused;
+pub mod loss;
+pub mod mesh;
+pub mod model;
+pub mod profile;
 pub mod runtime;
+
+pub use config::{HeadKind, PRESETS, PoissonNetConfig};
+pub use error::{NetError, Result};
+pub use mesh::{Backend, MeshTensors};
+pub use model::{LayerRow, PoissonNet, PoissonNetOutput, Summary};

@@ -1,0 +1,188 @@
+//! PoissonNet configuration and presets.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{NetError, Result};
+
+/// Which output head the network ends with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum HeadKind {
+    /// Neural-Jacobian-field head: a modulated vector MLP (width `W` to
+    /// `C_out`) on `G x`, plus the input's gradients `G X_in` as a residual
+    /// (so `C_in = C_out`), then a Poisson solve with the mean removed.
+    /// Outputs the vertex field and the Jacobian field.
+    #[default]
+    Njf,
+    /// A per-vertex `Linear(W, C_out)` on the final features (vertex output
+    /// only).
+    Linear,
+}
+
+/// Hyper-parameters of a [`crate::PoissonNet`]; stored as JSON next to the
+/// weights.
+///
+/// Architecture (DESIGN.md section 5): `proj_in: Linear(C_in, W)`; a
+/// conditioning MLP `Linear(C_e, W), GELU, Linear(W, W)` shared by every block
+/// (absent when `cond_channels == 0`); `blocks` Poisson blocks of width `W`
+/// with `vector_layers` complex layers each; then the head.
+///
+/// # Example
+/// ```
+/// use mfm_net::PoissonNetConfig;
+/// let c = PoissonNetConfig::paper();
+/// assert_eq!((c.width, c.blocks, c.vector_layers), (128, 5, 3));
+/// assert_eq!(c.num_parameters(), 1_369_600);
+/// let json = serde_json::to_string(&c).unwrap();
+/// assert_eq!(serde_json::from_str::<PoissonNetConfig>(&json).unwrap(), c);
+/// ```
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PoissonNetConfig {
+    /// Hidden width `W` (channels of vertex and face features).
+    pub width: usize,
+    /// Number of Poisson blocks `K`.
+    pub blocks: usize,
+    /// Complex linear layers per vector MLP (`nl`, at least 1); all but the
+    /// last are followed by the magnitude nonlinearity.
+    pub vector_layers: usize,
+    /// Input channels `C_in` per vertex.
+    pub in_channels: usize,
+    /// Output channels `C_out` per vertex.
+    pub out_channels: usize,
+    /// Conditioning channels `C_e` per vertex (0: no conditioning).
+    pub cond_channels: usize,
+    /// Whether vector MLPs are modulated by the face means of the features.
+    #[serde(default = "default_true")]
+    pub modulation: bool,
+    /// The output head.
+    #[serde(default)]
+    pub head: HeadKind,
+}
+
+fn default_true() -> bool {
+    true
+}
+
+/// Names accepted by [`PoissonNetConfig::preset`].
+pub const PRESETS: [&str; 3] = ["paper", "medium", "small"];
+
+impl PoissonNetConfig {
+    /// The paper's configuration: `W = 128`, `K = 5`, `nl = 3`, modulation on,
+    /// `C_in = C_out = 3`, `C_e = 4` (noisy xyz in, source xyz and `t` as
+    /// conditioning), NJF head: 1,369,600 parameters.
+    pub fn paper() -> Self {
+        Self::deformation(128, 5)
+    }
+
+    /// `W = 64`, `K = 4` (otherwise as [`PoissonNetConfig::paper`]):
+    /// 282,688 parameters.
+    pub fn medium() -> Self {
+        Self::deformation(64, 4)
+    }
+
+    /// `W = 32`, `K = 3` (otherwise as [`PoissonNetConfig::paper`]):
+    /// 56,000 parameters.
+    pub fn small() -> Self {
+        Self::deformation(32, 3)
+    }
+
+    /// A deformation model (`C_in = C_out = 3`, `C_e = 4`, `nl = 3`, NJF head)
+    /// of width `width` with `blocks` blocks.
+    pub fn deformation(width: usize, blocks: usize) -> Self {
+        Self {
+            width,
+            blocks,
+            vector_layers: 3,
+            in_channels: 3,
+            out_channels: 3,
+            cond_channels: 4,
+            modulation: true,
+            head: HeadKind::Njf,
+        }
+    }
+
+    /// A preset by name: `paper`, `medium` or `small`.
+    ///
+    /// Errors: [`NetError::Config`] naming the known presets.
+    pub fn preset(name: &str) -> Result<Self> {
+        match name {
+            "paper" => Ok(Self::paper()),
+            "medium" => Ok(Self::medium()),
+            "small" => Ok(Self::small()),
+            other => Err(NetError::Config(format!(
+                "unknown preset {other:?}; expected one of {}",
+                PRESETS.join(", ")
+            ))),
+        }
+    }
+
+    /// Checks the values: positive sizes, `vector_layers >= 1`, and
+    /// `in_channels == out_channels` for the NJF head (its residual adds the
+    /// input's gradients to the output's).
+    pub fn validate(&self) -> Result<()> {
+        let positive = [
+            ("width", self.width),
+            ("vector_layers", self.vector_layers),
+            ("in_channels", self.in_channels),
+            ("out_channels", self.out_channels),
+        ];
+        for (name, v) in positive {
+            if v == 0 {
+                return Err(NetError::Config(format!(
+                    "{name} must be at least 1, found 0"
+                )));
+            }
+        }
+        if self.head == HeadKind::Njf && self.in_channels != self.out_channels {
+            return Err(NetError::Config(format!(
+                "the NJF head adds G X_in to its output, so in_channels must equal out_channels; found {} and {}",
+                self.in_channels, self.out_channels
+            )));
+        }
+        Ok(())
+    }
+
+    /// Parameters of one vector MLP from `W` to `out` channels.
+    fn vector_mlp_parameters(&self, out: usize) -> usize {
+        let w = self.width;
+        let modulation = if self.modulation {
+            (w * w + w) + (w * 2 * w + 2 * w)
+        } else {
+            0
+        };
+        let layers: usize = (0..self.vector_layers)
+            .map(|i| {
+                let o = if i + 1 == self.vector_layers { out } else { w };
+                2 * w * o
+            })
+            .sum();
+        modulation + layers + (self.vector_layers - 1) * w
+    }
+
+    /// Parameters of one Poisson block.
+    pub fn block_parameters(&self) -> usize {
+        let w = self.width;
+        let h = if self.cond_channels > 0 { 3 * w } else { 2 * w };
+        let mlp1 = (h * w + w) + (w * w + w);
+        let mlp2 = 2 * (w * w + w);
+        self.vector_mlp_parameters(w) + mlp1 + mlp2 + 2 * w
+    }
+
+    /// Total number of trainable parameters (computed from the sizes; equals
+    /// the count of a built [`crate::PoissonNet`]).
+    pub fn num_parameters(&self) -> usize {
+        let w = self.width;
+        let proj = self.in_channels * w + w;
+        let cond = if self.cond_channels > 0 {
+            (self.cond_channels * w + w) + (w * w + w)
+        } else {
+            0
+        };
+        let head = match self.head {
+            HeadKind::Njf => self.vector_mlp_parameters(self.out_channels),
+            HeadKind::Linear => w * self.out_channels + self.out_channels,
+        };
+        proj + cond + self.blocks * self.block_parameters() + head
+    }
+}

@@ -1,0 +1,131 @@
+//! A coarse profiler for the network's sections: wall-clock and process CPU
+//! time per named section.
+//!
+//! Off by default (one relaxed atomic load per section when off). When on,
+//! [`section`] timers accumulate wall seconds, process CPU seconds (all
+//! threads; on a machine shared with other busy processes this is the
+//! steadier measure of the work) and call counts per name; the benchmark
+//! ([`crate::bench`]) turns it on to report where a training step spends its
+//! time. On the CPU torch operations are synchronous, so a section's time is
+//! the time of its operations; on a GPU it only measures the launch unless
+//! the section synchronizes.
+//!
+//! Sections nest freely (each reports its own inclusive time). Custom
+//! operators ([`crate::autograd::apply_linear`]) report as `op:<name>`, in the
+//! forward pass and when autograd calls them in the backward pass.
+
+use std::collections::BTreeMap;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+static ENABLED: AtomicBool = AtomicBool::new(false);
+static TOTALS: Mutex<BTreeMap<String, SectionTotal>> = Mutex::new(BTreeMap::new());
+
+/// Accumulated time of one section.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SectionTotal {
+    /// Wall-clock seconds.
+    pub wall: f64,
+    /// Process CPU seconds (all threads).
+    pub cpu: f64,
+    /// Number of times the section ran.
+    pub calls: u64,
+}
+
+/// Turns the profiler on or off (totals are kept; see [`reset`]).
+pub fn set_enabled(on: bool) {
+    ENABLED.store(on, Ordering::Relaxed);
+}
+
+/// Whether the profiler is on.
+pub fn enabled() -> bool {
+    ENABLED.load(Ordering::Relaxed)
+}
+
+/// Clears the accumulated totals.
+pub fn reset() {
+    if let Ok(mut t) = TOTALS.lock() {
+        t.clear();
+    }
+}
+
+/// Accumulated totals by section name, sorted by name.
+pub fn totals() -> Vec<(String, SectionTotal)> {
+    TOTALS
+        .lock()
+        .map(|t| t.iter().map(|(k, v)| (k.clone(), v.clone())).collect())
+        .unwrap_or_default()
+}
+
+/// Adds one run of `wall` / `cpu` seconds to the section `name`.
+pub fn record(name: &str, wall: f64, cpu: f64) {
+    if let Ok(mut t) = TOTALS.lock() {
+        let e = t.entry(name.to_owned()).or_default();
+        e.wall += wall;
+        e.cpu += cpu;
+        e.calls += 1;
+    }
+}
+
+/// A running section; records its time when dropped (only if the profiler
+/// was on when it started).
+#[derive(Debug)]
+pub struct Section {
+    start: Option<(String, Instant, f64)>,
+}
+
+impl Drop for Section {
+    fn drop(&mut self) {
+        if let Some((name, start, cpu)) = self.start.take() {
+            record(
+                &name,
+                start.elapsed().as_secs_f64(),
+                process_cpu_seconds() - cpu,
+            );
+        }
+    }
+}
+
+/// Starts timing the section `name` (a no-op when the profiler is off).
+pub fn section(name: impl Into<String>) -> Section {
+    Section {
+        start: enabled().then(|| (name.into(), Instant::now(), process_cpu_seconds())),
+    }
+}
+
+/// Times `f` as the section `name`.
+pub fn timed<R>(name: &str, f: impl FnOnce() -> R) -> R {
+    let _s = section(name);
+    f()
+}
+
+/// CPU time used by this process so far (all threads), in seconds; 0 where
+/// the platform offers no process clock.
+pub fn process_cpu_seconds() -> f64 {
+    #[cfg(target_os = "linux")]
+    {
+        #[repr(C)]
+        struct Timespec {
+            tv_sec: i64,
+            tv_nsec: i64,
+        }
+        const CLOCK_PROCESS_CPUTIME_ID: i32 = 2;
+        unsafe extern "C" {
+            fn clock_gettime(clock: i32, ts: *mut Timespec) -> i32;
+        }
+        let mut ts = Timespec {
+            tv_sec: 0,
+            tv_nsec: 0,
+        };
+        // SAFETY: clock_gettime writes one timespec.
+        if unsafe { clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &mut ts) } == 0 {
+            return ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9;
+        }
+        0.0
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        0.0
+    }
+}

@@ -1,0 +1,267 @@
+//! PoissonNet: parameter counts, gradients (finite differences in f64),
+//! saving and loading.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use common::{check_directional, check_parameters, randn, rel_max_diff};
+use mfm_geometry::procedural;
+use mfm_net::model::PoissonBlock;
+use mfm_net::{HeadKind, MeshTensors, NetError, PoissonNet, PoissonNetConfig};
+use tch::{Device, Kind, Tensor, nn};
+
+#[test]
+fn parameter_counts_match_the_reference_implementation() {
+    let cases = [
+        (PoissonNetConfig::paper(), 1_369_600),
+        (PoissonNetConfig::small(), 56_000),
+        (PoissonNetConfig::medium(), 282_688),
+        (PoissonNetConfig::preset("paper").unwrap(), 1_369_600),
+    ];
+    for (cfg, expected) in cases {
+        assert_eq!(cfg.num_parameters(), expected, "{cfg:?} (formula)");
+        let net = PoissonNet::new(&cfg, Device::Cpu).unwrap();
+        assert_eq!(net.num_parameters(), expected, "{cfg:?} (built)");
+        let summary = net.summary();
+        assert_eq!(summary.total, expected);
+        assert_eq!(
+            summary.rows.iter().map(|r| r.params).sum::<usize>(),
+            expected
+        );
+    }
+    // the paper preset's breakdown: proj 512 + cond 17152 + 5 x 247168 + head 116096
+    let paper = PoissonNetConfig::paper();
+    assert_eq!(paper.block_parameters(), 247_168);
+    let net = PoissonNet::new(&paper, Device::Cpu).unwrap();
+    let s = net.summary();
+    let sum_prefix = |p: &str| {
+        s.rows
+            .iter()
+            .filter(|r| r.name.starts_with(p))
+            .map(|r| r.params)
+            .sum::<usize>()
+    };
+    assert_eq!(sum_prefix("proj_in."), 512);
+    assert_eq!(sum_prefix("cond."), 17_152);
+    assert_eq!(sum_prefix("blocks.4."), 247_168);
+    assert_eq!(sum_prefix("head."), 116_096);
+    // natural order: blocks.0 .. blocks.4 in sequence, the table prints a total
+    let first_block_rows: Vec<&str> = s
+        .rows
+        .iter()
+        .filter(|r| r.name.starts_with("blocks."))
+        .map(|r| r.name.as_str())
+        .collect();
+    assert!(first_block_rows[0].starts_with("blocks.0."));
+    let text = s.to_string();
+    assert!(text.lines().last().unwrap().contains("1369600"), "{text}");
+    // the linear head
+    let lin = PoissonNetConfig {
+        head: HeadKind::Linear,
+        ..PoissonNetConfig::small()
+    };
+    let net = PoissonNet::new(&lin, Device::Cpu).unwrap();
+    assert_eq!(net.num_parameters(), lin.num_parameters());
+    assert!(
+        PoissonNetConfig::preset("huge")
+            .unwrap_err()
+            .to_string()
+            .contains("paper, medium, small")
+    );
+}
+
+fn tiny(width: usize, blocks: usize, head: HeadKind) -> PoissonNetConfig {
+    PoissonNetConfig {
+        width,
+        blocks,
+        vector_layers: 3,
+        in_channels: 3,
+        out_channels: 3,
+        cond_channels: 2,
+        modulation: true,
+        head,
+    }
+}
+
+#[test]
+fn one_block_passes_finite_difference_checks() {
+    tch::manual_seed(1);
+    let mesh = procedural::icosphere(1);
+    let mt = MeshTensors::new(&mesh).unwrap();
+    let v = mt.num_vertices() as i64;
+    let w = 5;
+    let mut vs = nn::VarStore::new(Device::Cpu);
+    let block = PoissonBlock::new(vs.root(), w, 3, true, true);
+    vs.double();
+    let r = randn(&[2, v, w as i64]);
+    let x = randn(&[2, v, w as i64]);
+    let e = randn(&[2, v, w as i64]);
+    // inputs
+    let f =
+        |xs: &[Tensor]| (block.forward(&xs[0], Some(&xs[1]), &mt).unwrap() * &r).sum(Kind::Double);
+    let err = check_directional(&[x.shallow_clone(), e.shallow_clone()], &f, 3, 1e-6);
+    assert!(err < 1e-6, "block inputs: relative FD error {err}");
+    // parameters
+    let params = vs.trainable_variables();
+    assert!(params.len() > 10);
+    let g = || (block.forward(&x, Some(&e), &mt).unwrap() * &r).sum(Kind::Double);
+    let err = check_parameters(&params, &g, 3, 1e-6);
+    assert!(err < 1e-6, "block parameters: relative FD error {err}");
+}
+
+#[test]
+fn full_network_with_njf_head_passes_finite_difference_checks() {
+    tch::manual_seed(2);
+    let mesh = procedural::icosphere(1);
+    let mt = MeshTensors::new(&mesh).unwrap();
+    let v = mt.num_vertices() as i64;
+    let f2 = 2 * mt.num_faces() as i64;
+    let mut net = PoissonNet::new(&tiny(4, 2, HeadKind::Njf), Device::Cpu).unwrap();
+    net.set_kind(Kind::Double);
+    let ru = randn(&[2, v, 3]);
+    let rg = randn(&[2, f2, 3]);
+    let loss = |x: &Tensor, e: &Tensor| {
+        let out = net.forward(&mt, x, Some(e)).unwrap();
+        (&out.vertex * &ru).sum(Kind::Double) + (out.jacobian.unwrap() * &rg).sum(Kind::Double)
+    };
+    let x = randn(&[2, v, 3]);
+    let e = randn(&[2, v, 2]);
+    let err = check_directional(
+        &[x.shallow_clone(), e.shallow_clone()],
+        &|xs| loss(&xs[0], &xs[1]),
+        3,
+        1e-6,
+    );
+    assert!(err < 1e-6, "network inputs: relative FD error {err}");
+    let params = net.var_store().trainable_variables();
+    let err = check_parameters(&params, &|| loss(&x, &e), 3, 1e-6);
+    assert!(err < 1e-6, "network parameters: relative FD error {err}");
+}
+
+#[test]
+fn linear_head_and_unconditioned_network_run_and_differentiate() {
+    let mesh = procedural::icosphere(1);
+    let mt = MeshTensors::new(&mesh).unwrap();
+    let v = mt.num_vertices() as i64;
+    let cfg = PoissonNetConfig {
+        cond_channels: 0,
+        in_channels: 2,
+        out_channels: 5,
+        ..tiny(4, 1, HeadKind::Linear)
+    };
+    let mut net = PoissonNet::new(&cfg, Device::Cpu).unwrap();
+    net.set_kind(Kind::Double);
+    let r = randn(&[1, v, 5]);
+    let f = |xs: &[Tensor]| (net.forward(&mt, &xs[0], None).unwrap().vertex * &r).sum(Kind::Double);
+    let err = check_directional(&[randn(&[v, 2])], &f, 2, 1e-6);
+    assert!(err < 1e-6, "{err}");
+    let out = net.forward(&mt, &randn(&[v, 2]), None).unwrap();
+    assert!(out.jacobian.is_none());
+    assert_eq!(out.vertex.size(), vec![1, v, 5]);
+    // conditioning passed to an unconditioned network is an error, not a panic
+    assert!(
+        net.forward(&mt, &randn(&[v, 2]), Some(&randn(&[v, 1])))
+            .is_err()
+    );
+    // NJF needs C_in == C_out
+    let bad = PoissonNetConfig {
+        out_channels: 4,
+        ..tiny(4, 1, HeadKind::Njf)
+    };
+    assert!(matches!(
+        PoissonNet::new(&bad, Device::Cpu),
+        Err(NetError::Config(_))
+    ));
+}
+
+#[test]
+fn input_errors_name_the_expected_shape() {
+    let mesh = procedural::icosphere(1);
+    let mt = MeshTensors::new(&mesh).unwrap();
+    let net = PoissonNet::new(&tiny(4, 1, HeadKind::Njf), Device::Cpu).unwrap();
+    let v = mt.num_vertices() as i64;
+    let x = Tensor::zeros([2, v + 1, 3], (Kind::Float, Device::Cpu));
+    let e = Tensor::zeros([2, v, 2], (Kind::Float, Device::Cpu));
+    let msg = net.forward(&mt, &x, Some(&e)).unwrap_err().to_string();
+    assert!(msg.contains("V=42"), "{msg}");
+    let x = Tensor::zeros([2, v, 3], (Kind::Double, Device::Cpu));
+    let msg = net.forward(&mt, &x, Some(&e)).unwrap_err().to_string();
+    assert!(msg.contains("Double"), "{msg}");
+    let x = Tensor::zeros([2, v, 3], (Kind::Float, Device::Cpu));
+    assert!(net.forward(&mt, &x, None).is_err());
+}
+
+#[test]
+fn batch_items_are_independent_and_many_meshes_work() {
+    tch::manual_seed(3);
+    let a = MeshTensors::new(&procedural::icosphere(1)).unwrap();
+    let b = MeshTensors::new(&procedural::icosphere(2)).unwrap();
+    let mut net = PoissonNet::new(&tiny(6, 2, HeadKind::Njf), Device::Cpu).unwrap();
+    net.set_kind(Kind::Double);
+    let (va, vb) = (a.num_vertices() as i64, b.num_vertices() as i64);
+    let xa = randn(&[3, va, 3]);
+    let ea = randn(&[3, va, 2]);
+    let batched = net.forward(&a, &xa, Some(&ea)).unwrap();
+    for i in 0..3 {
+        let one = net.forward(&a, &xa.get(i), Some(&ea.get(i))).unwrap();
+        assert!(rel_max_diff(&one.vertex.get(0), &batched.vertex.get(i)) < 1e-10);
+    }
+    let xb = randn(&[2, vb, 3]);
+    let eb = randn(&[1, vb, 2]); // shared conditioning
+    let outs = net
+        .forward_many(&[(&a, &xa, Some(&ea)), (&b, &xb, Some(&eb))])
+        .unwrap();
+    assert_eq!(outs[1].vertex.size(), vec![2, vb, 3]);
+    assert!(rel_max_diff(&outs[0].vertex, &batched.vertex) < 1e-12);
+    let loss =
+        outs[0].vertex.square().sum(Kind::Double) + outs[1].vertex.square().sum(Kind::Double);
+    loss.backward();
+    let grads: f64 = net
+        .var_store()
+        .trainable_variables()
+        .iter()
+        .map(|p| p.grad().abs().sum(Kind::Double).double_value(&[]))
+        .sum();
+    assert!(grads > 0.0 && grads.is_finite());
+}
+
+#[test]
+fn save_and_load_round_trip_and_mismatch_is_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("model.safetensors");
+    let cfg = tiny(6, 2, HeadKind::Njf);
+    let net = PoissonNet::new(&cfg, Device::Cpu).unwrap();
+    net.save(&path).unwrap();
+    assert!(PoissonNet::config_path(&path).is_file());
+    assert_eq!(PoissonNet::read_config(&path).unwrap(), cfg);
+    let loaded = PoissonNet::load(&path, Device::Cpu).unwrap();
+    let mesh = procedural::icosphere(1);
+    let mt = MeshTensors::new(&mesh).unwrap();
+    let v = mt.num_vertices() as i64;
+    let x = Tensor::randn([1, v, 3], (Kind::Float, Device::Cpu));
+    let e = Tensor::randn([1, v, 2], (Kind::Float, Device::Cpu));
+    let a = net.forward(&mt, &x, Some(&e)).unwrap().vertex;
+    let b = loaded.forward(&mt, &x, Some(&e)).unwrap().vertex;
+    assert_eq!(rel_max_diff(&a, &b), 0.0);
+
+    // a different configuration: the message names the file and the field
+    let mut other = PoissonNet::new(&tiny(8, 2, HeadKind::Njf), Device::Cpu).unwrap();
+    let msg = other.load_weights(&path).unwrap_err().to_string();
+    assert!(msg.contains("model.safetensors"), "{msg}");
+    assert!(
+        msg.contains("width = 6 in the file's configuration, 8 in the network's"),
+        "{msg}"
+    );
+    // without the configuration file, shapes and names are compared
+    std::fs::remove_file(PoissonNet::config_path(&path)).unwrap();
+    let msg = other.load_weights(&path).unwrap_err().to_string();
+    assert!(
+        msg.contains("model.safetensors") && msg.contains("shape differences"),
+        "{msg}"
+    );
+    let mut deeper = PoissonNet::new(&tiny(6, 3, HeadKind::Njf), Device::Cpu).unwrap();
+    let msg = deeper.load_weights(&path).unwrap_err().to_string();
+    assert!(msg.contains("missing in the file: blocks.2."), "{msg}");
+    // wrong extension
+    assert!(net.save(dir.path().join("model.pt")).is_err());
+}
