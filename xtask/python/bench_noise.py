@@ -204,7 +204,7 @@ def main(argv):
         r["subdiv"] = level
         results.append(r)
     report = {
-        "tool": "python: CHOLMOD via scikit-sparse %s, cholespy %s, libigl %s, numpy %s, scipy %s"
+        "tool": "CHOLMOD via scikit-sparse %s, cholespy %s, libigl %s, numpy %s, scipy %s"
         % (
             version("scikit-sparse"),
             version("cholespy"),

@@ -10,6 +10,13 @@
 //! 0.4.16 is built from source against the system SuiteSparse; when
 //! `cholmod.h` is missing, `apt-get install -y libsuitesparse-dev` is run
 //! (printed first).
+//!
+//! The levels are timed one after the other, each by the Python script and
+//! then by mfm-noise's `sampling_timings` example on the OFF file the script
+//! wrote, so that the two sides of a row run minutes apart under similar
+//! load. The table shows the fastest of the timed runs (the least disturbed
+//! by other work on a shared machine); the raw JSON, with medians, is kept
+//! in `<target>/bench-noise/`.
 
 use anyhow::{Context, Result, bail};
 use serde_json::Value;
@@ -19,7 +26,7 @@ use std::process::{Command, Stdio};
 
 /// Pinned peer packages: (pip requirement, short tag for the folder name).
 /// scikit-sparse 0.5 does not build against Debian 12's SuiteSparse 5.12;
-/// 0.4.16 does (its build isolation brings Cython and the numpy headers).
+/// 0.4.16 does, from source (no wheel), with [`BUILD_CONSTRAINTS`].
 const PEERS: &[(&str, &str)] = &[
     ("numpy==2.4.6", "np2.4.6"),
     ("scipy==1.17.1", "scipy1.17.1"),
@@ -27,6 +34,13 @@ const PEERS: &[(&str, &str)] = &[
     ("scikit-sparse==0.4.16", "sksparse0.4.16"),
     ("cholespy==2.2.0", "cholespy2.2.0"),
 ];
+
+/// Versions for scikit-sparse 0.4.16's isolated build environment (its
+/// `pyproject.toml` asks for `Cython>=0.22`, `numpy>=2.0`, setuptools and
+/// wheel, unpinned): the set that built it here, passed to pip as
+/// `PIP_CONSTRAINT` so that a later Cython or numpy cannot break the build.
+const BUILD_CONSTRAINTS: &str =
+    "Cython==3.3.1\nnumpy==2.4.6\nsetuptools==84.2.1\nwheel==0.48.0\npackaging==26.4\n";
 
 const MARKER: &str = ".mfm-env-complete";
 
@@ -43,7 +57,8 @@ pub struct NoiseBench<'a> {
     pub batch: usize,
     /// Screening weight `tau`.
     pub tau: f64,
-    /// Timed runs per measurement (the median is reported).
+    /// Timed runs per measurement, after one warm-up run (the table shows the
+    /// fastest; the JSON has the median too).
     pub runs: usize,
 }
 
@@ -79,46 +94,65 @@ pub fn noise(opts: &NoiseBench) -> Result<()> {
         "--example",
         "sampling_timings",
     ]))?;
-    let load_before = load_average();
-    eprintln!(
-        "xtask: timing CHOLMOD and cholespy on {} (levels {})",
-        opts.mesh.display(),
-        opts.levels
-    );
-    let peers = capture(
-        Command::new(&python)
-            .arg(&script)
-            .args(["--subdiv", opts.levels, "--runs", &runs])
-            .args(["--batch", &batch, "--tau", &tau, "--write-off"])
-            .arg(&dir)
-            .arg(opts.mesh),
-    )?;
+    let levels: Vec<u32> = opts
+        .levels
+        .split(',')
+        .map(|l| {
+            l.trim()
+                .parse::<u32>()
+                .with_context(|| format!("--levels {:?}: not a list of integers", opts.levels))
+        })
+        .collect::<Result<_>>()?;
     let stem = opts
         .mesh
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_else(|| "mesh".to_owned());
-    let files: Vec<PathBuf> = opts
-        .levels
-        .split(',')
-        .map(|l| dir.join(format!("{stem}_s{}.off", l.trim())))
-        .collect();
-    eprintln!("xtask: timing mfm-noise on the same arrays");
-    let ours = capture(
-        cargo()
-            .args([
-                "run",
-                "--quiet",
-                "--release",
-                "-p",
-                "mfm-noise",
-                "--example",
-                "sampling_timings",
-                "--",
-            ])
-            .args(["--runs", &runs, "--batch", &batch, "--tau", &tau])
-            .args(&files),
-    )?;
+    let load_before = load_average();
+    // level by level, the peers then mfm, so that both sides of a row are
+    // timed minutes apart under similar load
+    let mut peers = Value::Null;
+    let mut ours = Value::Null;
+    let mut peer_results = Vec::new();
+    let mut our_results = Vec::new();
+    for level in levels {
+        eprintln!(
+            "xtask: level {level}: timing CHOLMOD and cholespy on {} subdivided {level} times",
+            opts.mesh.display()
+        );
+        peers = capture(
+            Command::new(&python)
+                .arg(&script)
+                .args(["--subdiv", &level.to_string(), "--runs", &runs])
+                .args(["--batch", &batch, "--tau", &tau, "--write-off"])
+                .arg(&dir)
+                .arg(opts.mesh),
+        )?;
+        let file = dir.join(format!("{stem}_s{level}.off"));
+        eprintln!("xtask: level {level}: timing mfm-noise on the same arrays");
+        ours = capture(
+            cargo()
+                .args([
+                    "run",
+                    "--quiet",
+                    "--release",
+                    "-p",
+                    "mfm-noise",
+                    "--example",
+                    "sampling_timings",
+                    "--",
+                ])
+                .args(["--runs", &runs, "--batch", &batch, "--tau", &tau])
+                .arg(&file),
+        )?;
+        for (json, all) in [(&peers, &mut peer_results), (&ours, &mut our_results)] {
+            if let Some(r) = json["results"].as_array() {
+                all.extend(r.iter().cloned());
+            }
+        }
+    }
+    peers["results"] = Value::Array(peer_results);
+    ours["results"] = Value::Array(our_results);
     let load_after = load_average();
     for (name, json) in [("python.json", &peers), ("mfm.json", &ours)] {
         let path = dir.join(name);
@@ -175,8 +209,9 @@ fn capture(cmd: &mut Command) -> Result<Value> {
     serde_json::from_slice(&out.stdout).with_context(|| format!("{cmd:?} did not print JSON"))
 }
 
+/// The fastest of the timed runs, in milliseconds (`NaN` if missing).
 fn ms(v: &Value, key: &str) -> f64 {
-    v["median_ms"][key].as_f64().unwrap_or(f64::NAN)
+    v["min_ms"][key].as_f64().unwrap_or(f64::NAN)
 }
 
 fn print_table(peers: &Value, ours: &Value, batch: usize) -> Result<()> {
@@ -192,7 +227,7 @@ fn print_table(peers: &Value, ours: &Value, batch: usize) -> Result<()> {
     }
     let n = batch as f64;
     println!(
-        "median of {} runs; per-sample = batch of {batch} / {batch}; ratio = best of CHOLMOD and cholespy / mfm (> 1: mfm faster)",
+        "fastest of {} runs (medians in the JSON); per-sample = batch of {batch} / {batch}; ratio = best of CHOLMOD and cholespy / mfm (> 1: mfm faster)",
         ours["runs"]
     );
     println!(
@@ -363,8 +398,12 @@ fn install_peers(dir: &Path) -> Result<()> {
     if !python.exists() {
         crate::run(Command::new(base_python()).args(["-m", "venv"]).arg(dir))?;
     }
+    let constraints = dir.join("build-constraints.txt");
+    fs::write(&constraints, BUILD_CONSTRAINTS)
+        .with_context(|| format!("cannot write {}", constraints.display()))?;
     crate::run(
         Command::new(&python)
+            .env("PIP_CONSTRAINT", &constraints)
             .args([
                 "-m",
                 "pip",

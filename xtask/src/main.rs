@@ -93,7 +93,7 @@ enum BenchCmd {
         /// Screening weight tau of L + tau M.
         #[arg(long, default_value_t = 100.0)]
         tau: f64,
-        /// Timed runs per measurement (the median is reported).
+        /// Timed runs per measurement (the fastest is tabulated).
         #[arg(long, default_value_t = 3)]
         runs: usize,
     },
