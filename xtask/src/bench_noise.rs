@@ -18,6 +18,7 @@
 //! by other work on a shared machine); the raw JSON, with medians, is kept
 //! in `<target>/bench-noise/`.
 
+use crate::pyenv;
 use anyhow::{Context, Result, bail};
 use serde_json::Value;
 use std::fs;
@@ -325,36 +326,15 @@ fn cell(x: f64) -> String {
 fn peers_dir() -> Result<PathBuf> {
     let pinned = crate::pyenv::env_dir()?;
     let cache = pinned.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let mut name = format!("bench-peers-py{}", python_tag(&base_python())?);
+    let mut name = format!(
+        "bench-peers-py{}",
+        pyenv::python_tag(&pyenv::base_python())?
+    );
     for (_, short) in PEERS {
         name.push('-');
         name.push_str(short);
     }
     Ok(cache.join(name))
-}
-
-fn base_python() -> String {
-    std::env::var("MFM_BASE_PYTHON").unwrap_or_else(|_| "python3".to_owned())
-}
-
-/// `311` for Python 3.11.
-fn python_tag(python: &str) -> Result<String> {
-    let out = Command::new(python)
-        .args([
-            "-c",
-            "import sys; print(f'{sys.version_info[0]}{sys.version_info[1]}')",
-        ])
-        .output()
-        .with_context(|| {
-            format!("cannot run `{python}`: a Python 3 interpreter is needed (set MFM_BASE_PYTHON)")
-        })?;
-    if !out.status.success() {
-        bail!(
-            "`{python}` failed: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
-    Ok(String::from_utf8_lossy(&out.stdout).trim().to_owned())
 }
 
 /// Finds or creates the peers' environment; returns its interpreter.
@@ -396,7 +376,11 @@ fn install_peers(dir: &Path) -> Result<()> {
     );
     let python = dir.join("bin/python");
     if !python.exists() {
-        crate::run(Command::new(base_python()).args(["-m", "venv"]).arg(dir))?;
+        crate::run(
+            Command::new(pyenv::base_python())
+                .args(["-m", "venv"])
+                .arg(dir),
+        )?;
     }
     let constraints = dir.join("build-constraints.txt");
     fs::write(&constraints, BUILD_CONSTRAINTS)

@@ -56,11 +56,13 @@ fn cache_root() -> Result<PathBuf> {
     Ok(PathBuf::from(home).join(".cache/mfm"))
 }
 
-fn base_python() -> String {
+/// The interpreter environments are created with (`$MFM_BASE_PYTHON` or `python3`).
+pub(crate) fn base_python() -> String {
     std::env::var("MFM_BASE_PYTHON").unwrap_or_else(|_| "python3".to_owned())
 }
 
-fn python_tag(python: &str) -> Result<String> {
+/// `311` for Python 3.11.
+pub(crate) fn python_tag(python: &str) -> Result<String> {
     let out = Command::new(python)
         .args([
             "-c",
