@@ -1,5 +1,21 @@
 //! # mfm-fm
 //!
-//! Flow matching on meshes: datasets, training, sampling and metrics.
-//! Not implemented yet: it lands with the flow-matching issue. The crate
-//! exists so the workspace layout is complete; it exports nothing.
+//! Flow matching on triangle meshes (DESIGN.md sections 6-8): datasets of
+//! signals over one mesh, the GMM generator, training a PoissonNet along the
+//! rectified-flow path from Matérn noise, ODE sampling on any triangulation,
+//! checkpoints, and the evaluation metrics.
+
+pub mod checkpoint;
+pub mod config;
+pub mod dataset;
+pub mod error;
+pub mod experiment;
+pub mod geodesic;
+pub mod gmm;
+pub mod metrics;
+pub mod sample;
+pub mod signals;
+pub mod train;
+
+pub use error::{FmError, Result};
+pub use signals::{InMemorySignals, SignalSource};

@@ -1,0 +1,1 @@
+//! On-disk datasets of signals over one mesh.

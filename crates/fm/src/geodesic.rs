@@ -1,0 +1,1 @@
+//! Geodesic distances by the heat method.

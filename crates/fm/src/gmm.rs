@@ -1,0 +1,1 @@
+//! The GMM signal generator.

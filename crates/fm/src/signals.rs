@@ -1,0 +1,136 @@
+//! [`SignalSource`]: where training reads its signals from, one batch at a
+//! time, without holding a large dataset in memory.
+
+use crate::error::{FmError, Result};
+
+/// A set of `len()` signals over one mesh, each `num_vertices() x channels()`
+/// values (vertex-major, like a `V x 3` position array when `channels == 3`).
+///
+/// Implemented by the on-disk [`Dataset`](crate::dataset::Dataset), which reads
+/// only the requested rows, and by [`InMemorySignals`].
+pub trait SignalSource: Send + Sync {
+    /// Number of signals.
+    fn len(&self) -> usize;
+    /// Whether there are no signals.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Vertices per signal.
+    fn num_vertices(&self) -> usize;
+    /// Channels per vertex.
+    fn channels(&self) -> usize;
+    /// Writes signals `indices` (in that order) into `out`, row-major
+    /// `[indices.len(), V, C]`.
+    ///
+    /// # Errors
+    /// [`FmError::SizeMismatch`] if `out` has the wrong length or an index is
+    /// out of range; I/O or format errors of the backing storage.
+    fn read_into(&self, indices: &[usize], out: &mut [f32]) -> Result<()>;
+}
+
+/// Signals held in memory: row-major `[N, V, C]` `f32` values.
+///
+/// # Example
+/// ```
+/// use mfm_fm::signals::{InMemorySignals, SignalSource};
+/// let s = InMemorySignals::new(vec![1.0, 2.0, 3.0, 4.0], 2, 2, 1).unwrap();
+/// let mut out = [0.0f32; 2];
+/// s.read_into(&[1], &mut out).unwrap();
+/// assert_eq!(out, [3.0, 4.0]);
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct InMemorySignals {
+    data: Vec<f32>,
+    len: usize,
+    vertices: usize,
+    channels: usize,
+}
+
+impl InMemorySignals {
+    /// Wraps `data`, row-major `[len, vertices, channels]`.
+    ///
+    /// # Errors
+    /// [`FmError::SizeMismatch`] if the length is not the product of the sizes.
+    pub fn new(data: Vec<f32>, len: usize, vertices: usize, channels: usize) -> Result<Self> {
+        let expected = len
+            .checked_mul(vertices)
+            .and_then(|x| x.checked_mul(channels))
+            .ok_or_else(|| FmError::Config("signal array size overflows usize".into()))?;
+        if data.len() != expected {
+            return Err(FmError::SizeMismatch {
+                what: format!("signal data for [{len}, {vertices}, {channels}]"),
+                expected,
+                found: data.len(),
+            });
+        }
+        Ok(Self {
+            data,
+            len,
+            vertices,
+            channels,
+        })
+    }
+
+    /// The values, row-major `[N, V, C]`.
+    pub fn data(&self) -> &[f32] {
+        &self.data
+    }
+
+    /// Signal `i` (`V x C` values).
+    pub fn signal(&self, i: usize) -> &[f32] {
+        let n = self.vertices * self.channels;
+        &self.data[i * n..(i + 1) * n]
+    }
+}
+
+impl SignalSource for InMemorySignals {
+    fn len(&self) -> usize {
+        self.len
+    }
+
+    fn num_vertices(&self) -> usize {
+        self.vertices
+    }
+
+    fn channels(&self) -> usize {
+        self.channels
+    }
+
+    fn read_into(&self, indices: &[usize], out: &mut [f32]) -> Result<()> {
+        let n = self.vertices * self.channels;
+        if out.len() != indices.len() * n {
+            return Err(FmError::SizeMismatch {
+                what: "output buffer".into(),
+                expected: indices.len() * n,
+                found: out.len(),
+            });
+        }
+        for (chunk, &i) in out.chunks_mut(n.max(1)).zip(indices) {
+            if i >= self.len {
+                return Err(FmError::SizeMismatch {
+                    what: "signal index".into(),
+                    expected: self.len,
+                    found: i,
+                });
+            }
+            chunk.copy_from_slice(self.signal(i));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rejects_bad_sizes_and_indices() {
+        assert!(InMemorySignals::new(vec![0.0; 5], 2, 2, 1).is_err());
+        let s = InMemorySignals::new(vec![0.0, 1.0, 2.0, 3.0, 4.0, 5.0], 3, 1, 2).unwrap();
+        let mut out = [0.0f32; 4];
+        s.read_into(&[2, 0], &mut out).unwrap();
+        assert_eq!(out, [4.0, 5.0, 0.0, 1.0]);
+        assert!(s.read_into(&[3, 0], &mut out).is_err());
+        assert!(s.read_into(&[0], &mut out).is_err());
+    }
+}
