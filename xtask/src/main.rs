@@ -8,15 +8,23 @@
 //! - `demo`: the main job on a built-in default.
 //! - `bench operators`: operator assembly times, ours and libigl's, in one run.
 //! - `bench noise`: Matérn sampling, ours against CHOLMOD and cholespy, in one run.
+//! - `reproduce-figures gmm`: the paper's GMM table at CPU scale (noise
+//!   kinds compared on a non-uniform test mesh).
 //! - `reproduce-figures spectral`: the paper's noise figures (per-frequency
 //!   statistics, spectrum, fixed vs normalized tau, noise on a non-uniform
 //!   triangulation) and the numbers behind them, from scratch.
+//! - `mfm ARGS...`: build the release `mfm` with the project's libtorch and
+//!   run it.
+//! - `visual-check DIR`: PNG contact sheets of the PLY files under DIR,
+//!   rendered offscreen with pyvista.
 
 mod bench;
 mod bench_noise;
 mod demo;
 mod figures;
+mod figures_gmm;
 mod pyenv;
+mod visual_check;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
@@ -54,6 +62,17 @@ enum Cmd {
     /// Regenerate the paper's figures (PNGs plus the numbers behind them).
     #[command(subcommand)]
     ReproduceFigures(FiguresCmd),
+    /// Build the release `mfm` binary with the project's libtorch and run it
+    /// with the given arguments (e.g. `cargo xtask mfm -- net summary`), in
+    /// the current folder.
+    Mfm {
+        /// Arguments passed to `mfm`.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
+    /// Render the PLY files under DIR offscreen with pyvista into PNG contact
+    /// sheets (one per folder; signals as colors, plain meshes shaded).
+    VisualCheck(visual_check::VisualCheckArgs),
 }
 
 #[derive(Subcommand)]
@@ -61,6 +80,9 @@ enum FiguresCmd {
     /// Noise figures of paper section 3: per-frequency statistics, spectrum,
     /// fixed vs normalized tau, noise on a non-uniform triangulation.
     Spectral(figures::SpectralArgs),
+    /// The paper's GMM table at CPU scale: matern vs white vs naive noise,
+    /// trained on a uniform mesh, evaluated on a non-uniform one.
+    Gmm(figures_gmm::GmmArgs),
 }
 
 #[derive(Subcommand)]
@@ -201,5 +223,22 @@ fn main() -> Result<()> {
             })
         }
         Cmd::ReproduceFigures(FiguresCmd::Spectral(args)) => figures::spectral(&args),
+        Cmd::ReproduceFigures(FiguresCmd::Gmm(args)) => {
+            let env = pyenv::ensure()?;
+            figures_gmm::gmm(&env, &args)
+        }
+        Cmd::Mfm { args } => {
+            let env = pyenv::ensure()?;
+            let exe = demo::mfm_binary(&env)?;
+            let status = Command::new(&exe)
+                .args(&args)
+                .status()
+                .with_context(|| format!("cannot run {}", exe.display()))?;
+            std::process::exit(status.code().unwrap_or(1));
+        }
+        Cmd::VisualCheck(args) => {
+            let env = pyenv::ensure()?;
+            visual_check::run(&env.python, &args)
+        }
     }
 }

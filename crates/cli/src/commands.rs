@@ -116,6 +116,21 @@ pub enum Command {
         #[arg(long, value_delimiter = ',', default_value = "2,10,50")]
         coefficients: Vec<usize>,
     },
+    /// Generate a dataset of signals over a mesh.
+    #[command(subcommand)]
+    Dataset(crate::flow::DatasetCommand),
+    /// Train a flow-matching model on a dataset (checkpoints, resumable;
+    /// Ctrl-C writes a checkpoint).
+    Train(crate::flow::TrainArgs),
+    /// Generate signals with a trained run on any triangulation of the
+    /// training surface.
+    Sample(crate::flow::SampleArgs),
+    /// Metrics of generated samples against a reference dataset: MMD, COV,
+    /// 1-NNA, GMM test error.
+    Eval(crate::flow::EvalArgs),
+    /// PoissonNet: layer tables of the presets and training-step benchmarks.
+    #[command(subcommand)]
+    Net(crate::net::NetCommand),
 }
 
 /// Per-vertex quantities `mfm render --scalar` can show.
@@ -173,6 +188,11 @@ pub fn run(cmd: Command) -> Result<()> {
             plots: plots.as_deref(),
             coefficients: &coefficients,
         }),
+        Command::Dataset(cmd) => crate::flow::dataset(cmd),
+        Command::Train(args) => crate::flow::train(args),
+        Command::Sample(args) => crate::flow::sample(args),
+        Command::Eval(args) => crate::flow::eval(args),
+        Command::Net(cmd) => crate::net::run(cmd),
     }
 }
 

@@ -4,7 +4,9 @@
 //! failure ends with a non-zero exit status and a one-line reason on stderr.
 
 mod commands;
+mod flow;
 mod mesh_arg;
+mod net;
 mod output;
 mod spectral;
 
@@ -15,7 +17,7 @@ use clap::Parser;
     name = "mfm",
     version,
     about = "Triangulation-agnostic signals on triangle meshes: reports, operators, noise, flow matching",
-    after_help = "MESH is a file (.obj .off .ply .gltf .glb) or a built-in mesh: builtin:icosphere[:SUBDIV], \
+    after_help = "MESH is a file (.obj .off .ply .gltf .glb) or a built-in mesh: builtin:icosphere[:SUBDIV], builtin:blob[:SUBDIV], \
 builtin:uv-sphere, builtin:torus, builtin:capsule, builtin:grid[:N]."
 )]
 struct Cli {
@@ -24,6 +26,9 @@ struct Cli {
 }
 
 fn main() {
+    // Keeps freed tensor memory for reuse (large speed-up for training on
+    // glibc); harmless for the commands that do not use libtorch.
+    mfm_net::runtime::tune_allocator();
     let cli = Cli::parse();
     if let Err(e) = commands::run(cli.command) {
         eprintln!("mfm: error: {e:#}");

@@ -5,7 +5,7 @@ use mfm_geometry::{TriMesh, io, procedural};
 use std::path::Path;
 
 /// Names accepted after `builtin:`.
-pub const BUILTINS: &[&str] = &["icosphere", "uv-sphere", "torus", "capsule", "grid"];
+pub const BUILTINS: &[&str] = &["icosphere", "blob", "uv-sphere", "torus", "capsule", "grid"];
 
 /// Loads a mesh from a file, or builds a built-in one (`builtin:NAME[:N]`,
 /// where N is a resolution parameter: subdivisions for the icosphere, cells per
@@ -30,6 +30,13 @@ pub fn load_mesh(spec: &str) -> Result<TriMesh> {
                 bail!("{spec}: at most 8 subdivisions (the mesh would have over 1.3M vertices)");
             }
             procedural::icosphere(s)
+        }
+        "blob" => {
+            let s = param.unwrap_or(4);
+            if s > 8 {
+                bail!("{spec}: at most 8 subdivisions (the mesh would have over 1.3M vertices)");
+            }
+            procedural::blob(s)?
         }
         "uv-sphere" => {
             let k = param.unwrap_or(1).clamp(1, 64);

@@ -1,4 +1,5 @@
 //! End-to-end tests that drive the real `mfm` binary.
+#![allow(clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -346,4 +347,235 @@ fn spectrum_reports_matern_variance_near_theory_and_compares_meshes() {
     for f in ["variance.png", "coefficients.png"] {
         assert!(plots.join(f).is_file(), "{f}");
     }
+}
+
+#[test]
+fn net_summary_counts_match_the_reference_implementation() {
+    for (preset, expected) in [
+        ("paper", 1_369_600u64),
+        ("medium", 282_688),
+        ("small", 56_000),
+    ] {
+        let o = mfm(&["net", "summary", "--preset", preset, "--json"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(v["parameters"].as_u64(), Some(expected), "{preset}");
+        assert!(v["config"]["width"].as_u64().is_some());
+    }
+    // The table lists every variable and ends with the total.
+    let o = mfm(&["net", "summary", "--preset", "small"]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("proj_in.weight"), "{text}");
+    let last = text.lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with("total") && last.trim_end().ends_with("56000"),
+        "{last}"
+    );
+    let o = mfm(&["net", "summary", "--preset", "huge"]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("paper, medium, small"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn net_bench_prints_step_and_inference_medians() {
+    let o = mfm(&[
+        "net",
+        "bench",
+        "builtin:icosphere:2",
+        "--preset",
+        "small",
+        "--batch",
+        "2",
+        "--steps",
+        "1",
+        "--warmup",
+        "0",
+        "--inference",
+        "1",
+        "--threads",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("56000 parameters"), "{text}");
+    assert!(text.contains("training step (median of 1)"), "{text}");
+    assert!(text.contains("inference, batch 1 (median of 1)"), "{text}");
+    let o = mfm(&["net", "bench", "builtin:icosphere:2", "--batch", "0"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--batch"), "{}", stderr(&o));
+}
+
+fn read_npy_f32(path: &Path) -> (Vec<u64>, Vec<f32>) {
+    let bytes = std::fs::read(path).unwrap();
+    let npy = npyz::NpyFile::new(&bytes[..]).unwrap();
+    let shape = npy.shape().to_vec();
+    (shape, npy.into_vec::<f32>().unwrap())
+}
+
+/// The flow-matching workflow from the command line on a small mesh:
+/// dataset -> train (with a TOML config) -> sample on another
+/// triangulation -> eval, plus the errors a user meets on the way.
+#[test]
+fn gmm_dataset_train_sample_eval_end_to_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |s: &str| dir.path().join(s).to_string_lossy().into_owned();
+    let o = mfm(&[
+        "dataset",
+        "gmm",
+        "--mesh",
+        "builtin:blob:2",
+        "--out",
+        &p("data"),
+        "--n",
+        "12",
+        "--reference",
+        "6",
+        "--sigma",
+        "0.1",
+        "--min-separation",
+        "2",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "train/signals.npy",
+        "train/manifest.json",
+        "reference/signals.npy",
+        "preview.png",
+    ] {
+        assert!(dir.path().join("data").join(f).is_file(), "{f} missing");
+    }
+    let (shape, values) = read_npy_f32(&dir.path().join("data/train/signals.npy"));
+    assert_eq!(shape.len(), 3);
+    assert_eq!((shape[0], shape[2]), (12, 1));
+    let max = values.iter().copied().fold(f32::MIN, f32::max);
+    assert!(max > 0.5 && max < 1.5, "bump peaks near 1, found {max}");
+    // A second run into the same folder refuses and keeps the data.
+    let o = mfm(&[
+        "dataset",
+        "gmm",
+        "--mesh",
+        "builtin:blob:2",
+        "--out",
+        &p("data"),
+        "--n",
+        "2",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("not empty"), "{}", stderr(&o));
+    assert_eq!(
+        read_npy_f32(&dir.path().join("data/train/signals.npy")).1,
+        values
+    );
+
+    // A config with a typo names the field.
+    std::fs::write(dir.path().join("bad.toml"), "[train]\nstepz = 3\n").unwrap();
+    let o = mfm(&[
+        "train",
+        "--config",
+        &p("bad.toml"),
+        "--dataset",
+        &p("data/train"),
+        "--out",
+        &p("run"),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("stepz") && stderr(&o).contains("bad.toml"),
+        "{}",
+        stderr(&o)
+    );
+
+    let config = "[model]\npreset = \"small\"\nwidth = 8\nblocks = 1\nvector_layers = 1\n\
+                  [train]\nsteps = 4\nbatch = 2\ncheckpoint_every = 2\nlog_every = 1\n\
+                  [sample]\nsteps = 2\n";
+    std::fs::write(dir.path().join("run.toml"), config).unwrap();
+    let o = mfm(&[
+        "train",
+        "--config",
+        &p("run.toml"),
+        "--dataset",
+        &p("data/train"),
+        "--out",
+        &p("run"),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(dir.path().join("run/model.safetensors").is_file());
+    let log = std::fs::read_to_string(dir.path().join("run/train_log.csv")).unwrap();
+    assert_eq!(log.lines().count(), 5, "header + 4 rows:\n{log}");
+    // Training again into a finished run folder is refused.
+    let o = mfm(&[
+        "train",
+        "--config",
+        &p("run.toml"),
+        "--dataset",
+        &p("data/train"),
+        "--out",
+        &p("run"),
+    ]);
+    assert!(!o.status.success());
+
+    // Sample on the reference's (non-uniform, finer) mesh.
+    let test_mesh = p("data/reference/mesh.ply");
+    let o = mfm(&[
+        "sample",
+        "--run",
+        &p("run"),
+        "--mesh",
+        &test_mesh,
+        "--n",
+        "5",
+        "--out",
+        &p("samples"),
+        "--ply",
+        "2",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (shape, samples) = read_npy_f32(&dir.path().join("samples/samples.npy"));
+    let test_v = mfm_geometry::io::read_mesh(&test_mesh)
+        .unwrap()
+        .num_vertices() as u64;
+    assert_eq!(shape, vec![5, test_v, 1]);
+    assert!(samples.iter().all(|x| x.is_finite()));
+    assert!(dir.path().join("samples/sample_001.ply").is_file());
+    assert!(!dir.path().join("samples/sample_002.ply").exists());
+    assert!(dir.path().join("samples/samples.png").is_file());
+
+    let o = mfm(&[
+        "eval",
+        "--samples",
+        &p("samples/samples.npy"),
+        "--reference",
+        &p("data/reference"),
+        "--out",
+        &p("metrics.json"),
+        "--png",
+        &p("means.png"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
+            .unwrap();
+    assert_eq!(m["num_generated"], 5);
+    assert_eq!(m["num_reference"], 6);
+    let cov = m["cov"].as_f64().unwrap();
+    assert!(
+        (0.0..=1.0).contains(&cov) && m["mmd"].as_f64().unwrap() > 0.0,
+        "{m}"
+    );
+    assert!(dir.path().join("means.png").is_file());
+    // Samples from another mesh do not fit the reference.
+    let o = mfm(&[
+        "eval",
+        "--samples",
+        &p("data/train/signals.npy"),
+        "--reference",
+        &p("data/reference"),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("vertices"), "{}", stderr(&o));
 }

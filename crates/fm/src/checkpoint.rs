@@ -1,1 +1,524 @@
-//! Atomic checkpoints.
+//! The run folder and its checkpoints: layout, atomic writes, integrity
+//! checks.
+//!
+//! ## Layout of a run folder
+//! ```text
+//! run/
+//!   config.toml              the RunConfig the run was started with
+//!   flow.json                FlowSpec: what sampling needs besides the weights
+//!   train_log.csv            step,loss,lr,grad_norm,seconds (one row per log interval)
+//!   checkpoints/
+//!     step-000001000/        one checkpoint (the newest `keep_checkpoints` are kept)
+//!       model.safetensors    network weights
+//!       model.json           network configuration (PoissonNetConfig)
+//!       optimizer.safetensors Adam moments `m.<variable>`, `v.<variable>`
+//!       config.toml          copy of the run configuration
+//!       flow.json            copy of the flow spec
+//!       state.json           CheckpointState: step, seed, log accumulators,
+//!                            size and CRC-32 of every other file
+//!   model.safetensors        the final model (when training finished)
+//!   model.json
+//! ```
+//!
+//! A checkpoint is written into a temporary folder (`checkpoints/.tmp-...`),
+//! every file synced, `state.json` written last with the checksums of the
+//! others, and the folder renamed to its final name: a crash leaves either
+//! the complete checkpoint or a temporary folder that is ignored and cleaned
+//! up. [`verify_checkpoint`] re-reads every file and compares sizes and
+//! CRC-32s, so a truncated or corrupted file is reported by name before
+//! anything is loaded.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use mfm_noise::NoiseKind;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{FmError, Result};
+
+/// The run configuration file (in the run folder and in each checkpoint).
+pub const CONFIG_FILE: &str = "config.toml";
+/// The [`FlowSpec`] file (in the run folder and in each checkpoint).
+pub const FLOW_FILE: &str = "flow.json";
+/// Network weights (safetensors).
+pub const WEIGHTS_FILE: &str = "model.safetensors";
+/// Network configuration (JSON), written next to the weights.
+pub const NET_CONFIG_FILE: &str = "model.json";
+/// Adam state (safetensors).
+pub const OPTIMIZER_FILE: &str = "optimizer.safetensors";
+/// [`CheckpointState`] (JSON).
+pub const STATE_FILE: &str = "state.json";
+/// The training log (CSV) in the run folder.
+pub const LOG_FILE: &str = "train_log.csv";
+/// The folder of checkpoints in the run folder.
+pub const CHECKPOINTS_DIR: &str = "checkpoints";
+/// Version of [`CheckpointState`]'s format.
+pub const STATE_FORMAT: u32 = 1;
+
+/// What a trained model needs besides its weights to generate samples:
+/// the noise it starts from and how the network is conditioned. Fixed when
+/// training starts (named noise scales and the mean offset are resolved on
+/// the training data then) and stored as `flow.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FlowSpec {
+    /// Channels `C` per vertex of the signals.
+    pub channels: usize,
+    /// The noise kind (command-line form in the file).
+    #[serde(with = "crate::config::noise_kind_string")]
+    pub noise: NoiseKind,
+    /// Factor applied to every noise sample.
+    pub noise_scale: f64,
+    /// Whether the network is conditioned on source xyz as well as `t`
+    /// (conditioning `[x, y, z, t]` per vertex; otherwise `[t]`).
+    pub condition_on_xyz: bool,
+    /// Constant per-channel velocity added to the network's vertex output
+    /// (`C` values; zeros when disabled), see
+    /// [`ModelConfig::mean_offset`](crate::config::ModelConfig::mean_offset).
+    pub velocity_offset: Vec<f64>,
+}
+
+impl FlowSpec {
+    /// Reads a `flow.json`.
+    ///
+    /// # Errors
+    /// [`FmError::Io`] / [`FmError::Format`] naming the file; a spec whose
+    /// offset length differs from its channel count is a format error.
+    pub fn read(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
+        let spec: Self = serde_json::from_str(&text)
+            .map_err(|e| FmError::format(path, format!("invalid flow spec: {e}")))?;
+        if spec.velocity_offset.len() != spec.channels || spec.channels == 0 {
+            return Err(FmError::format(
+                path,
+                format!(
+                    "velocity_offset has {} values for {} channels",
+                    spec.velocity_offset.len(),
+                    spec.channels
+                ),
+            ));
+        }
+        if !(spec.noise_scale.is_finite() && spec.noise_scale > 0.0) {
+            return Err(FmError::format(
+                path,
+                format!(
+                    "noise_scale must be finite and > 0, found {}",
+                    spec.noise_scale
+                ),
+            ));
+        }
+        Ok(spec)
+    }
+
+    /// Writes the spec as JSON, atomically.
+    ///
+    /// # Errors
+    /// [`FmError::Io`] naming the file.
+    pub fn write(&self, path: impl AsRef<Path>) -> Result<()> {
+        let path = path.as_ref();
+        let json = serde_json::to_string_pretty(self)
+            .map_err(|e| FmError::format(path, format!("cannot serialize the flow spec: {e}")))?;
+        write_atomic(path, json.as_bytes())
+    }
+}
+
+/// Size and CRC-32 (IEEE) of one file of a checkpoint.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FileRecord {
+    /// Length in bytes.
+    pub bytes: u64,
+    /// CRC-32 of the contents.
+    pub crc32: u32,
+}
+
+/// Running sums of the current log interval (so a resumed run writes the
+/// same rows as an uninterrupted one).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LogAccumulator {
+    /// Sum of the step losses since the last row.
+    pub loss_sum: f64,
+    /// Sum of the (unclipped) gradient norms since the last row.
+    pub grad_norm_sum: f64,
+    /// Number of steps since the last row.
+    pub count: u64,
+}
+
+/// `state.json` of a checkpoint.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CheckpointState {
+    /// [`STATE_FORMAT`].
+    pub format: u32,
+    /// Optimizer steps completed (the next step to run).
+    pub step: u64,
+    /// The run's seed.
+    pub seed: u64,
+    /// How the run's randomness is derived: every random choice of step `s`
+    /// is a pure function of `(seed, s)`, so `step` is the whole generator
+    /// state; recorded for readers of the file.
+    pub rng: String,
+    /// Training seconds before this checkpoint (summed over resumed
+    /// sessions).
+    pub elapsed_seconds: f64,
+    /// The loss of the last step, if any.
+    pub last_loss: Option<f64>,
+    /// The current log interval's sums.
+    pub log: LogAccumulator,
+    /// Every other file of the checkpoint, by name.
+    pub files: BTreeMap<String, FileRecord>,
+}
+
+/// A checkpoint folder found in a run folder.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CheckpointInfo {
+    /// Steps completed.
+    pub step: u64,
+    /// The folder.
+    pub dir: PathBuf,
+}
+
+/// Writes `bytes` to `path` through a temporary file in the same folder,
+/// synced, then renamed over `path`.
+///
+/// # Errors
+/// [`FmError::Io`] naming the file.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .unwrap_or("file")
+        .to_owned();
+    let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
+    {
+        let mut f = File::create(&tmp).map_err(|e| FmError::io(&tmp, e))?;
+        f.write_all(bytes).map_err(|e| FmError::io(&tmp, e))?;
+        f.sync_all().map_err(|e| FmError::io(&tmp, e))?;
+    }
+    std::fs::rename(&tmp, path).map_err(|e| FmError::io(path, e))
+}
+
+/// Size and CRC-32 of a file.
+///
+/// # Errors
+/// [`FmError::Io`] naming the file.
+pub fn file_record(path: &Path) -> Result<FileRecord> {
+    let bytes = std::fs::read(path).map_err(|e| FmError::io(path, e))?;
+    let mut h = crc32fast::Hasher::new();
+    h.update(&bytes);
+    Ok(FileRecord {
+        bytes: bytes.len() as u64,
+        crc32: h.finalize(),
+    })
+}
+
+/// The folder of the checkpoint after `step` steps.
+pub fn checkpoint_dir(run_dir: &Path, step: u64) -> PathBuf {
+    run_dir
+        .join(CHECKPOINTS_DIR)
+        .join(format!("step-{step:09}"))
+}
+
+/// The checkpoint folders of a run (`checkpoints/step-N`), ascending in
+/// step; temporary folders are skipped. No folder: an empty list.
+///
+/// # Errors
+/// [`FmError::Io`] if the folder cannot be listed.
+pub fn list_checkpoints(run_dir: &Path) -> Result<Vec<CheckpointInfo>> {
+    let root = run_dir.join(CHECKPOINTS_DIR);
+    let entries = match std::fs::read_dir(&root) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(FmError::io(&root, e)),
+    };
+    let mut out = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| FmError::io(&root, e))?;
+        let name = entry.file_name();
+        let Some(step) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix("step-"))
+            .and_then(|n| n.parse::<u64>().ok())
+        else {
+            continue;
+        };
+        if entry.path().is_dir() {
+            out.push(CheckpointInfo {
+                step,
+                dir: entry.path(),
+            });
+        }
+    }
+    out.sort_by_key(|c| c.step);
+    Ok(out)
+}
+
+/// Removes temporary folders left in `checkpoints/` by interrupted writes.
+///
+/// # Errors
+/// [`FmError::Io`] naming the folder that could not be removed.
+pub fn remove_stale_temporaries(run_dir: &Path) -> Result<()> {
+    let root = run_dir.join(CHECKPOINTS_DIR);
+    let Ok(entries) = std::fs::read_dir(&root) else {
+        return Ok(());
+    };
+    for entry in entries.flatten() {
+        let is_tmp = entry
+            .file_name()
+            .to_str()
+            .is_some_and(|n| n.starts_with(".tmp-"));
+        if is_tmp {
+            let p = entry.path();
+            std::fs::remove_dir_all(&p).map_err(|e| FmError::io(&p, e))?;
+        }
+    }
+    Ok(())
+}
+
+/// Reads a checkpoint's `state.json` and checks every file it lists (size,
+/// then CRC-32) and that the files every checkpoint needs are listed.
+///
+/// Cost: one read of every file of the checkpoint.
+///
+/// # Errors
+/// [`FmError::Io`] for a missing or unreadable file, [`FmError::Format`]
+/// naming the file that is truncated, corrupted, or unparsable.
+pub fn verify_checkpoint(dir: &Path) -> Result<CheckpointState> {
+    let state_path = dir.join(STATE_FILE);
+    let text = std::fs::read_to_string(&state_path).map_err(|e| FmError::io(&state_path, e))?;
+    let state: CheckpointState = serde_json::from_str(&text).map_err(|e| {
+        FmError::format(
+            &state_path,
+            format!("unreadable checkpoint state (truncated or corrupted?): {e}"),
+        )
+    })?;
+    if state.format != STATE_FORMAT {
+        return Err(FmError::format(
+            &state_path,
+            format!(
+                "checkpoint format {} is not supported (expected {STATE_FORMAT})",
+                state.format
+            ),
+        ));
+    }
+    for required in [
+        WEIGHTS_FILE,
+        NET_CONFIG_FILE,
+        OPTIMIZER_FILE,
+        CONFIG_FILE,
+        FLOW_FILE,
+    ] {
+        if !state.files.contains_key(required) {
+            return Err(FmError::format(
+                &state_path,
+                format!("the checkpoint does not list its {required}"),
+            ));
+        }
+    }
+    for (name, expected) in &state.files {
+        let path = dir.join(name);
+        let found = file_record(&path)?;
+        if found.bytes != expected.bytes {
+            return Err(FmError::format(
+                &path,
+                format!(
+                    "checkpoint file has {} bytes, expected {} (truncated or overwritten)",
+                    found.bytes, expected.bytes
+                ),
+            ));
+        }
+        if found.crc32 != expected.crc32 {
+            return Err(FmError::format(
+                &path,
+                format!(
+                    "checkpoint file is corrupted: CRC-32 {:08x}, expected {:08x}",
+                    found.crc32, expected.crc32
+                ),
+            ));
+        }
+    }
+    Ok(state)
+}
+
+/// Writes the checkpoint after `state.step` steps: `fill` writes the
+/// payload files into a fresh temporary folder, then the checksums of every
+/// file there go into `state.files`, `state.json` is written, and the folder
+/// is renamed to [`checkpoint_dir`] (replacing an older checkpoint of the
+/// same step). Returns the final folder.
+///
+/// # Errors
+/// Those of `fill`; [`FmError::Io`] naming the file or folder.
+pub fn write_checkpoint(
+    run_dir: &Path,
+    mut state: CheckpointState,
+    fill: impl FnOnce(&Path) -> Result<()>,
+) -> Result<PathBuf> {
+    let root = run_dir.join(CHECKPOINTS_DIR);
+    std::fs::create_dir_all(&root).map_err(|e| FmError::io(&root, e))?;
+    let tmp = root.join(format!(
+        ".tmp-step-{:09}-{}",
+        state.step,
+        std::process::id()
+    ));
+    if tmp.exists() {
+        std::fs::remove_dir_all(&tmp).map_err(|e| FmError::io(&tmp, e))?;
+    }
+    std::fs::create_dir(&tmp).map_err(|e| FmError::io(&tmp, e))?;
+    fill(&tmp)?;
+    let mut files = BTreeMap::new();
+    for entry in std::fs::read_dir(&tmp).map_err(|e| FmError::io(&tmp, e))? {
+        let entry = entry.map_err(|e| FmError::io(&tmp, e))?;
+        let Some(name) = entry.file_name().to_str().map(str::to_owned) else {
+            continue;
+        };
+        if name.starts_with('.') || name == STATE_FILE || !entry.path().is_file() {
+            continue;
+        }
+        let path = entry.path();
+        // make sure the payload is on disk before the state that vouches for it
+        File::open(&path)
+            .and_then(|f| f.sync_all())
+            .map_err(|e| FmError::io(&path, e))?;
+        files.insert(name, file_record(&path)?);
+    }
+    state.files = files;
+    state.format = STATE_FORMAT;
+    let json = serde_json::to_string_pretty(&state).map_err(|e| {
+        FmError::format(
+            tmp.join(STATE_FILE),
+            format!("cannot serialize the state: {e}"),
+        )
+    })?;
+    write_atomic(&tmp.join(STATE_FILE), json.as_bytes())?;
+    let dest = checkpoint_dir(run_dir, state.step);
+    if dest.exists() {
+        std::fs::remove_dir_all(&dest).map_err(|e| FmError::io(&dest, e))?;
+    }
+    std::fs::rename(&tmp, &dest).map_err(|e| FmError::io(&dest, e))?;
+    // persist the rename (best effort: not every platform can sync a folder)
+    if let Ok(d) = File::open(&root) {
+        let _ = d.sync_all();
+    }
+    Ok(dest)
+}
+
+/// Deletes all but the newest `keep` checkpoints; returns the deleted
+/// folders.
+///
+/// # Errors
+/// [`FmError::Io`] naming the folder that could not be removed.
+pub fn prune_checkpoints(run_dir: &Path, keep: usize) -> Result<Vec<PathBuf>> {
+    let all = list_checkpoints(run_dir)?;
+    let n = all.len().saturating_sub(keep.max(1));
+    let mut removed = Vec::new();
+    for c in all.into_iter().take(n) {
+        std::fs::remove_dir_all(&c.dir).map_err(|e| FmError::io(&c.dir, e))?;
+        removed.push(c.dir);
+    }
+    Ok(removed)
+}
+
+/// What [`newest_valid_checkpoint`] found: the newest checkpoint that passed
+/// its check (with its state), and the newer ones that did not, each with
+/// its error (newest first).
+pub type NewestValid = (
+    Option<(CheckpointInfo, CheckpointState)>,
+    Vec<(PathBuf, FmError)>,
+);
+
+/// The newest checkpoint that passes [`verify_checkpoint`], and the newer
+/// ones that did not, each with its error (newest first).
+///
+/// # Errors
+/// [`FmError::Io`] if the checkpoint folder cannot be listed.
+pub fn newest_valid_checkpoint(run_dir: &Path) -> Result<NewestValid> {
+    let mut rejected = Vec::new();
+    for c in list_checkpoints(run_dir)?.into_iter().rev() {
+        match verify_checkpoint(&c.dir) {
+            Ok(state) if state.step == c.step => return Ok((Some((c, state)), rejected)),
+            Ok(state) => {
+                let msg = format!(
+                    "folder name says step {} but the state says {}",
+                    c.step, state.step
+                );
+                rejected.push((c.dir.clone(), FmError::format(c.dir.join(STATE_FILE), msg)));
+            }
+            Err(e) => rejected.push((c.dir.clone(), e)),
+        }
+    }
+    Ok((None, rejected))
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    fn state(step: u64) -> CheckpointState {
+        CheckpointState {
+            format: STATE_FORMAT,
+            step,
+            seed: 1,
+            rng: "test".into(),
+            elapsed_seconds: 0.0,
+            last_loss: None,
+            log: LogAccumulator::default(),
+            files: BTreeMap::new(),
+        }
+    }
+
+    fn fill(dir: &Path) -> Result<()> {
+        for name in [
+            WEIGHTS_FILE,
+            NET_CONFIG_FILE,
+            OPTIMIZER_FILE,
+            CONFIG_FILE,
+            FLOW_FILE,
+        ] {
+            std::fs::write(dir.join(name), format!("contents of {name}"))
+                .map_err(|e| FmError::io(dir, e))?;
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn write_verify_detect_and_prune() {
+        let run = tempfile::tempdir().unwrap();
+        for step in [5, 10, 15] {
+            write_checkpoint(run.path(), state(step), fill).unwrap();
+        }
+        let steps: Vec<u64> = list_checkpoints(run.path())
+            .unwrap()
+            .iter()
+            .map(|c| c.step)
+            .collect();
+        assert_eq!(steps, [5, 10, 15]);
+        let s = verify_checkpoint(&checkpoint_dir(run.path(), 15)).unwrap();
+        assert_eq!(s.files.len(), 5);
+        assert_eq!(
+            s.files[CONFIG_FILE].bytes,
+            "contents of config.toml".len() as u64
+        );
+
+        // same length, one byte changed: only the CRC can tell
+        let f = checkpoint_dir(run.path(), 15).join(CONFIG_FILE);
+        std::fs::write(&f, "contents of config.tomm").unwrap();
+        let err = verify_checkpoint(&checkpoint_dir(run.path(), 15)).unwrap_err();
+        assert!(err.to_string().contains("config.toml") && err.to_string().contains("CRC"));
+        let (best, rejected) = newest_valid_checkpoint(run.path()).unwrap();
+        assert_eq!(best.unwrap().0.step, 10);
+        assert_eq!(rejected.len(), 1);
+
+        assert_eq!(prune_checkpoints(run.path(), 2).unwrap().len(), 1);
+        let steps: Vec<u64> = list_checkpoints(run.path())
+            .unwrap()
+            .iter()
+            .map(|c| c.step)
+            .collect();
+        assert_eq!(steps, [10, 15]);
+    }
+}

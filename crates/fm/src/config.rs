@@ -1,1 +1,836 @@
-//! Run configuration.
+//! [`RunConfig`]: everything a training run needs besides its data, as one
+//! TOML file.
+//!
+//! A run folder holds the configuration it was started with
+//! (`config.toml`, written by [`RunConfig::write_toml_file`]); every
+//! checkpoint carries a copy. Every field has a default, so a file only
+//! names what differs from it, and unknown fields are errors (a typo never
+//! silently falls back to a default).
+//!
+//! ## The file
+//! ```toml
+//! [dataset]
+//! path = "data/gmm"            # read by the caller (CLI); recorded here
+//!
+//! [model]
+//! preset = "paper"             # PoissonNet preset: paper, medium, small
+//! width = 64                   # optional overrides of the preset's sizes
+//! blocks = 4
+//! vector_layers = 3
+//! head = "njf"                 # or "linear"
+//! modulation = true
+//! condition_on_xyz = false     # condition on t only (true: source xyz and t)
+//! mean_offset = true
+//!
+//! [noise]
+//! kind = "matern:100"          # any form NoiseKind parses
+//! scale = 1.0                  # a factor, or "unit", or "data"
+//!
+//! [train]
+//! steps = 160000
+//! batch = 32
+//! lr = 5e-4
+//! lr_schedule = { milestones = [[40000, 1e-4]] }   # or { decay = 0.2, at = [40000, 160000] }
+//! grad_clip = 1.0
+//! checkpoint_every = 1000
+//! log_every = 100
+//! seed = 0
+//! threads = 0
+//! device = "auto"
+//!
+//! [sample]
+//! steps = 32
+//! method = "midpoint"
+//! batch = 8
+//! seed = 0
+//! ```
+//!
+//! [`RunConfig::default`] is the paper's training recipe (paper section 4 and
+//! its implementation details) on the paper's network, conditioned on `t`
+//! only; [`RunConfig::preset`] gives the named presets `paper` (the paper's
+//! deformation model, conditioned on source xyz and `t`) and `cpu` (a small
+//! network and a few hundred steps, about a minute on two cores).
+//!
+//! # Example
+//! ```
+//! use mfm_fm::config::RunConfig;
+//! let cfg = RunConfig::from_toml_str("[train]\nsteps = 10\n", "inline").unwrap();
+//! assert_eq!(cfg.train.steps, 10);
+//! assert_eq!(cfg.train.batch, 32); // the default
+//! let err = RunConfig::from_toml_str("[train]\nstep = 10\n", "inline").unwrap_err();
+//! assert!(err.to_string().contains("step"));
+//! let back = RunConfig::from_toml_str(&cfg.to_toml_string().unwrap(), "inline").unwrap();
+//! assert_eq!(back, cfg);
+//! ```
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use mfm_net::{HeadKind, PoissonNetConfig};
+use mfm_noise::NoiseKind;
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+use crate::error::{FmError, Result};
+
+/// Names accepted by [`RunConfig::preset`].
+pub const PRESETS: [&str; 2] = ["paper", "cpu"];
+
+/// A training run: data, network, noise, optimization and sampling settings.
+///
+/// Every section and field has a default (see each field); `RunConfig::default()`
+/// is the paper's recipe with `t`-only conditioning.
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct RunConfig {
+    /// Where the signals come from.
+    pub dataset: DatasetConfig,
+    /// The PoissonNet denoiser.
+    pub model: ModelConfig,
+    /// The noise the flow starts from.
+    pub noise: NoiseConfig,
+    /// Optimization.
+    pub train: TrainConfig,
+    /// ODE sampling.
+    pub sample: SampleConfig,
+}
+
+/// `[dataset]`: where the signals are.
+#[derive(Clone, Debug, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct DatasetConfig {
+    /// The dataset folder (default: none). The training code receives the
+    /// signals and the mesh from its caller; this records where they came
+    /// from so a run folder documents itself and the CLI can resume it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub path: Option<PathBuf>,
+}
+
+/// `[model]`: the PoissonNet. Input and output channels follow the
+/// dataset's channel count `C`; conditioning is `t` (1 channel) or source
+/// xyz and `t` (4 channels, `[x, y, z, t]` per vertex).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ModelConfig {
+    /// A [`PoissonNetConfig::preset`] name giving the sizes: `paper`
+    /// (`W = 128, K = 5, nl = 3`), `medium` (`64, 4, 3`) or `small`
+    /// (`32, 3, 3`). Default `paper`.
+    pub preset: String,
+    /// Hidden width `W`, overriding the preset's (default: the preset's).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub width: Option<usize>,
+    /// Number of Poisson blocks `K`, overriding the preset's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub blocks: Option<usize>,
+    /// Complex layers per vector MLP `nl`, overriding the preset's.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub vector_layers: Option<usize>,
+    /// Output head: `njf` (the paper's; vertex and Jacobian velocities) or
+    /// `linear`. Default `njf`.
+    pub head: HeadKind,
+    /// Whether the vector MLPs are modulated (default `true`, the paper's).
+    pub modulation: bool,
+    /// Condition every block on the source vertex positions as well as on
+    /// `t` (default `false`; the paper's deformation models use `true`).
+    /// When sampling on another mesh, its positions are the source xyz.
+    pub condition_on_xyz: bool,
+    /// Add a constant per-channel velocity, the dataset's mean
+    /// (mass-weighted over the surface, averaged over up to 256 evenly spaced
+    /// signals), to the network's vertex velocity (default `true`).
+    ///
+    /// The NJF head removes the mass-weighted mean of its output, so without
+    /// this a sample keeps the (near zero) mean of its noise and can never
+    /// reach data whose mean is not zero (a field of positive bumps, a shape
+    /// away from the origin). With the offset, the straight path's expected
+    /// mean velocity `E[mean f_1] - E[mean f_0] = E[mean f_1]` is supplied
+    /// and the network learns the rest. It does not change the gradients
+    /// (the output is orthogonal to constants in the mass inner product), only
+    /// the reported loss and the samples. Ignored (zero) for the linear head.
+    pub mean_offset: bool,
+}
+
+impl Default for ModelConfig {
+    fn default() -> Self {
+        Self {
+            preset: "paper".into(),
+            width: None,
+            blocks: None,
+            vector_layers: None,
+            head: HeadKind::Njf,
+            modulation: true,
+            condition_on_xyz: false,
+            mean_offset: true,
+        }
+    }
+}
+
+impl ModelConfig {
+    /// Conditioning channels per vertex: 4 with source xyz, 1 otherwise.
+    pub fn cond_channels(&self) -> usize {
+        if self.condition_on_xyz { 4 } else { 1 }
+    }
+
+    /// The network configuration for signals of `channels` channels.
+    ///
+    /// # Errors
+    /// [`FmError::Config`] for an unknown preset, `channels == 0` or sizes
+    /// the network rejects.
+    pub fn net_config(&self, channels: usize) -> Result<PoissonNetConfig> {
+        let base = PoissonNetConfig::preset(&self.preset)
+            .map_err(|e| FmError::Config(format!("model.preset: {e}")))?;
+        let cfg = PoissonNetConfig {
+            width: self.width.unwrap_or(base.width),
+            blocks: self.blocks.unwrap_or(base.blocks),
+            vector_layers: self.vector_layers.unwrap_or(base.vector_layers),
+            in_channels: channels,
+            out_channels: channels,
+            cond_channels: self.cond_channels(),
+            modulation: self.modulation,
+            head: self.head,
+        };
+        cfg.validate()
+            .map_err(|e| FmError::Config(format!("model: {e}")))?;
+        Ok(cfg)
+    }
+}
+
+/// How noise samples are scaled before training and sampling.
+///
+/// In TOML: a number (a fixed factor), `"unit"` or `"data"`. The named
+/// forms are resolved to a factor once, on the training mesh, when training
+/// starts, and that factor is stored with the run (`flow.json`), so sampling
+/// on any other mesh uses the same one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum NoiseScale {
+    /// Multiply every sample by this factor (`> 0`).
+    Factor(f64),
+    /// Scale so the noise has unit root-mean-square value over the training
+    /// surface (mass-weighted, estimated from 64 samples).
+    Unit,
+    /// Scale so the noise's root-mean-square value equals that of the data
+    /// after removing each signal's per-channel mean (the part the network
+    /// models; mass-weighted, up to 256 signals).
+    Data,
+}
+
+impl Default for NoiseScale {
+    fn default() -> Self {
+        Self::Factor(1.0)
+    }
+}
+
+impl fmt::Display for NoiseScale {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Factor(x) => write!(f, "{x}"),
+            Self::Unit => f.write_str("unit"),
+            Self::Data => f.write_str("data"),
+        }
+    }
+}
+
+impl Serialize for NoiseScale {
+    fn serialize<S: Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        match self {
+            Self::Factor(x) => s.serialize_f64(*x),
+            Self::Unit => s.serialize_str("unit"),
+            Self::Data => s.serialize_str("data"),
+        }
+    }
+}
+
+impl<'de> Deserialize<'de> for NoiseScale {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        struct V;
+        impl serde::de::Visitor<'_> for V {
+            type Value = NoiseScale;
+            fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str(r#"a positive number, "unit" or "data""#)
+            }
+            fn visit_f64<E: serde::de::Error>(self, v: f64) -> std::result::Result<NoiseScale, E> {
+                if v.is_finite() && v > 0.0 {
+                    Ok(NoiseScale::Factor(v))
+                } else {
+                    Err(E::custom(format!(
+                        "noise scale must be a finite number > 0, found {v}"
+                    )))
+                }
+            }
+            fn visit_i64<E: serde::de::Error>(self, v: i64) -> std::result::Result<NoiseScale, E> {
+                self.visit_f64(v as f64)
+            }
+            fn visit_u64<E: serde::de::Error>(self, v: u64) -> std::result::Result<NoiseScale, E> {
+                self.visit_f64(v as f64)
+            }
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> std::result::Result<NoiseScale, E> {
+                match v {
+                    "unit" => Ok(NoiseScale::Unit),
+                    "data" => Ok(NoiseScale::Data),
+                    other => Err(E::custom(format!(
+                        r#"unknown noise scale {other:?}; expected a positive number, "unit" or "data""#
+                    ))),
+                }
+            }
+        }
+        d.deserialize_any(V)
+    }
+}
+
+/// `[noise]`: the distribution `f_0` is drawn from.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct NoiseConfig {
+    /// The noise kind, in [`NoiseKind`]'s command-line form (`matern:100`,
+    /// `matern-normalized:0.5`, `white`, `naive`, `explicit:64:100`).
+    ///
+    /// Default `matern:100`, the paper's `tau = 100` (used for all its
+    /// experiments). `tau` has units of 1 / length²: the noise is smooth
+    /// over distances below about `1 / sqrt(tau) = 0.1`, a tenth of a
+    /// unit-sized shape, so it matches meshes normalized to about unit size
+    /// (as the paper's and this project's datasets are) and signals whose
+    /// features are a few tenths of the size across (Gaussian bumps, elastic
+    /// poses). For meshes of another scale use `matern-normalized:C`, which
+    /// adapts `tau` to the mesh, or rescale the mesh.
+    #[serde(with = "noise_kind_string")]
+    pub kind: NoiseKind,
+    /// Factor applied to every noise sample (default `1.0`, the paper's
+    /// unscaled noise).
+    ///
+    /// Magnitudes: Matérn noise on a smooth closed surface has pointwise
+    /// variance close to `1 / (4 pi tau)` (the continuous Matérn field's), so
+    /// `matern:100` has a root-mean-square value of about `0.028`, much
+    /// smaller than signals of amplitude ~1; naive noise has 1 and white
+    /// noise `1 / sqrt(m_v)`, which grows with the vertex count. The paper
+    /// trains with the unscaled noise; `"unit"` (or a factor of about
+    /// `sqrt(4 pi tau)`, 35 for `tau = 100`) gives noise and data comparable
+    /// magnitudes, the usual choice in flow matching, and `"data"` matches
+    /// the data's spread exactly. See [`NoiseScale`].
+    pub scale: NoiseScale,
+}
+
+impl Default for NoiseConfig {
+    fn default() -> Self {
+        Self {
+            kind: NoiseKind::Matern {
+                tau: mfm_noise::kind::DEFAULT_TAU,
+            },
+            scale: NoiseScale::default(),
+        }
+    }
+}
+
+/// Serializes a [`NoiseKind`] as its command-line string.
+pub(crate) mod noise_kind_string {
+    use mfm_noise::NoiseKind;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(k: &NoiseKind, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&k.to_string())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<NoiseKind, D::Error> {
+        let s = String::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+/// The learning rate as a function of the step.
+///
+/// In TOML: `{ milestones = [[STEP, LR], ...] }` (from step `STEP` on, the
+/// rate is `LR`; steps ascending; an empty list is a constant rate) or
+/// `{ decay = FACTOR, at = [STEP, ...] }` (the base rate times
+/// `FACTOR^(number of listed steps <= step)`). Steps count from 0.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "LrScheduleRepr", into = "LrScheduleRepr")]
+pub enum LrSchedule {
+    /// `(step, lr)` pairs, ascending in step.
+    Milestones(Vec<(u64, f64)>),
+    /// Multiply by `factor` at each of the steps `at` (ascending).
+    Decay {
+        /// The factor.
+        factor: f64,
+        /// The steps.
+        at: Vec<u64>,
+    },
+}
+
+impl Default for LrSchedule {
+    /// The paper's: `1e-4` from step 40,000 on.
+    fn default() -> Self {
+        Self::Milestones(vec![(40_000, 1e-4)])
+    }
+}
+
+impl LrSchedule {
+    /// A constant rate.
+    pub fn constant() -> Self {
+        Self::Milestones(Vec::new())
+    }
+
+    /// The rate at `step` (0-based) for the base rate `base`.
+    pub fn lr(&self, base: f64, step: u64) -> f64 {
+        match self {
+            Self::Milestones(m) => m
+                .iter()
+                .take_while(|(s, _)| *s <= step)
+                .last()
+                .map_or(base, |(_, lr)| *lr),
+            Self::Decay { factor, at } => {
+                let n = at.iter().filter(|&&s| s <= step).count();
+                base * factor.powi(n as i32)
+            }
+        }
+    }
+
+    fn validate(&self) -> std::result::Result<(), String> {
+        let ascending = |steps: &mut dyn Iterator<Item = u64>| {
+            let v: Vec<u64> = steps.collect();
+            v.windows(2).all(|w| w[0] < w[1])
+        };
+        match self {
+            Self::Milestones(m) => {
+                if !ascending(&mut m.iter().map(|(s, _)| *s)) {
+                    return Err("milestone steps must be strictly ascending".into());
+                }
+                if let Some((s, lr)) = m.iter().find(|(_, lr)| !(lr.is_finite() && *lr > 0.0)) {
+                    return Err(format!(
+                        "milestone at step {s}: lr must be finite and > 0, found {lr}"
+                    ));
+                }
+            }
+            Self::Decay { factor, at } => {
+                if !(factor.is_finite() && *factor > 0.0) {
+                    return Err(format!("decay must be finite and > 0, found {factor}"));
+                }
+                if !ascending(&mut at.iter().copied()) {
+                    return Err("decay steps `at` must be strictly ascending".into());
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The TOML form of [`LrSchedule`] (one table, checked on conversion).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LrScheduleRepr {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    milestones: Option<Vec<(u64, f64)>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    decay: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    at: Option<Vec<u64>>,
+}
+
+impl TryFrom<LrScheduleRepr> for LrSchedule {
+    type Error = String;
+
+    fn try_from(r: LrScheduleRepr) -> std::result::Result<Self, String> {
+        let s = match (r.milestones, r.decay, r.at) {
+            (Some(m), None, None) => Self::Milestones(m),
+            (None, Some(factor), Some(at)) => Self::Decay { factor, at },
+            (None, Some(_), None) => return Err("lr_schedule: `decay` needs `at`".into()),
+            (None, None, Some(_)) => return Err("lr_schedule: `at` needs `decay`".into()),
+            (None, None, None) => {
+                return Err(
+                    "lr_schedule: expected `milestones = [[step, lr], ...]` or `decay` with `at`"
+                        .into(),
+                );
+            }
+            _ => {
+                return Err(
+                    "lr_schedule: give either `milestones` or `decay` with `at`, not both".into(),
+                );
+            }
+        };
+        s.validate().map_err(|e| format!("lr_schedule: {e}"))?;
+        Ok(s)
+    }
+}
+
+impl From<LrSchedule> for LrScheduleRepr {
+    fn from(s: LrSchedule) -> Self {
+        match s {
+            LrSchedule::Milestones(m) => Self {
+                milestones: Some(m),
+                decay: None,
+                at: None,
+            },
+            LrSchedule::Decay { factor, at } => Self {
+                milestones: None,
+                decay: Some(factor),
+                at: Some(at),
+            },
+        }
+    }
+}
+
+/// Where training runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum DeviceChoice {
+    /// The first CUDA device when libtorch sees one, else the CPU.
+    #[default]
+    Auto,
+    /// The CPU.
+    Cpu,
+    /// The first CUDA device (an error without one).
+    Cuda,
+}
+
+impl DeviceChoice {
+    /// The device this choice resolves to in this process.
+    ///
+    /// # Errors
+    /// [`FmError::Config`] for `cuda` when libtorch sees no CUDA device.
+    pub fn resolve(self) -> Result<tch::Device> {
+        let cuda = tch::Cuda::is_available();
+        match self {
+            Self::Auto if cuda => Ok(tch::Device::Cuda(0)),
+            Self::Auto | Self::Cpu => Ok(tch::Device::Cpu),
+            Self::Cuda if cuda => Ok(tch::Device::Cuda(0)),
+            Self::Cuda => Err(FmError::Config(
+                "train.device = \"cuda\" but libtorch sees no CUDA device".into(),
+            )),
+        }
+    }
+}
+
+/// `[train]`: optimization. Defaults are the paper's recipe.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainConfig {
+    /// Number of optimizer steps (default 160,000).
+    pub steps: u64,
+    /// Signals per step (default 32).
+    pub batch: usize,
+    /// Base learning rate (default `5e-4`).
+    pub lr: f64,
+    /// Learning-rate schedule (default: `1e-4` from step 40,000 on).
+    pub lr_schedule: LrSchedule,
+    /// Clip the global gradient norm to this value (default 1; 0 disables).
+    pub grad_clip: f64,
+    /// Adam's `beta1` (default 0.9).
+    pub adam_beta1: f64,
+    /// Adam's `beta2` (default 0.999).
+    pub adam_beta2: f64,
+    /// Adam's `epsilon` (default `1e-8`).
+    pub adam_eps: f64,
+    /// Write a checkpoint every this many steps (default 1000); one is
+    /// always written at the end and when stopped.
+    pub checkpoint_every: u64,
+    /// Checkpoints kept in the run folder (default 2, at least 1).
+    pub keep_checkpoints: usize,
+    /// Write a log row every this many steps (default 100), with the mean
+    /// loss and gradient norm since the previous row.
+    pub log_every: u64,
+    /// Seed of every random choice of the run (default 0): initial weights,
+    /// batch order, times and noise.
+    pub seed: u64,
+    /// libtorch intra-op threads (default 0: libtorch's default).
+    pub threads: usize,
+    /// `auto` (default), `cpu` or `cuda`.
+    pub device: DeviceChoice,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            steps: 160_000,
+            batch: 32,
+            lr: 5e-4,
+            lr_schedule: LrSchedule::default(),
+            grad_clip: 1.0,
+            adam_beta1: 0.9,
+            adam_beta2: 0.999,
+            adam_eps: 1e-8,
+            checkpoint_every: 1000,
+            keep_checkpoints: 2,
+            log_every: 100,
+            seed: 0,
+            threads: 0,
+            device: DeviceChoice::Auto,
+        }
+    }
+}
+
+impl TrainConfig {
+    /// The learning rate of step `step` (0-based).
+    pub fn lr_at(&self, step: u64) -> f64 {
+        self.lr_schedule.lr(self.lr, step)
+    }
+}
+
+/// ODE integrator for sampling.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OdeMethod {
+    /// Explicit midpoint (second order, two network evaluations per step;
+    /// the paper's).
+    #[default]
+    Midpoint,
+    /// Forward Euler (first order, one evaluation per step).
+    Euler,
+}
+
+impl std::str::FromStr for OdeMethod {
+    type Err = FmError;
+
+    /// `midpoint` or `euler`.
+    fn from_str(s: &str) -> Result<Self> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "midpoint" => Ok(Self::Midpoint),
+            "euler" => Ok(Self::Euler),
+            other => Err(FmError::Config(format!(
+                "unknown ODE method {other:?}; expected midpoint or euler"
+            ))),
+        }
+    }
+}
+
+/// `[sample]`: generation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SampleConfig {
+    /// ODE steps from `t = 0` to `t = 1` (default 32).
+    pub steps: usize,
+    /// Integrator (default `midpoint`).
+    pub method: OdeMethod,
+    /// Samples integrated together (default 8); bounds memory.
+    pub batch: usize,
+    /// Noise seed of generated samples (default 0).
+    pub seed: u64,
+}
+
+impl Default for SampleConfig {
+    fn default() -> Self {
+        Self {
+            steps: 32,
+            method: OdeMethod::Midpoint,
+            batch: 8,
+            seed: 0,
+        }
+    }
+}
+
+impl RunConfig {
+    /// A named preset:
+    /// - `paper`: the paper's deformation model and recipe: PoissonNet
+    ///   `W = 128, K = 5, nl = 3` conditioned on source xyz and `t`,
+    ///   `matern:100` noise, batch 32, 160k steps, lr `5e-4` then `1e-4`
+    ///   from step 40k, gradient clipping at 1.
+    /// - `cpu`: a CPU-sized run of the same method: `W = 16, K = 2, nl = 2`,
+    ///   batch 4, 300 steps, lr `2e-3` then `5e-4` from step 200, a
+    ///   checkpoint every 100 steps, 16 midpoint steps for sampling, noise
+    ///   scaled to unit RMS on the training mesh (`scale = "unit"`: with
+    ///   signals of amplitude ~1, unscaled `matern:100` noise (RMS ~0.03)
+    ///   makes the short run learn little). About a
+    ///   minute of training on two cores at ~2k vertices.
+    ///
+    /// # Errors
+    /// [`FmError::Config`] naming the known presets.
+    pub fn preset(name: &str) -> Result<Self> {
+        match name {
+            "paper" => {
+                let mut c = Self::default();
+                c.model.condition_on_xyz = true;
+                Ok(c)
+            }
+            "cpu" => {
+                let base = Self::default();
+                Ok(Self {
+                    model: ModelConfig {
+                        preset: "small".into(),
+                        width: Some(16),
+                        blocks: Some(2),
+                        vector_layers: Some(2),
+                        ..ModelConfig::default()
+                    },
+                    train: TrainConfig {
+                        steps: 300,
+                        batch: 4,
+                        lr: 2e-3,
+                        lr_schedule: LrSchedule::Milestones(vec![(200, 5e-4)]),
+                        checkpoint_every: 100,
+                        log_every: 10,
+                        ..base.train
+                    },
+                    noise: NoiseConfig {
+                        scale: NoiseScale::Unit,
+                        ..base.noise
+                    },
+                    sample: SampleConfig {
+                        steps: 16,
+                        ..base.sample
+                    },
+                    ..base
+                })
+            }
+            other => Err(FmError::Config(format!(
+                "unknown run preset {other:?}; expected one of {}",
+                PRESETS.join(", ")
+            ))),
+        }
+    }
+
+    /// Checks values the types cannot: positive sizes and rates, a valid
+    /// noise kind and network.
+    ///
+    /// # Errors
+    /// [`FmError::Config`] naming the field (`train.batch`, ...).
+    pub fn validate(&self) -> Result<()> {
+        let t = &self.train;
+        let bad = |field: &str, expected: &str, found: String| {
+            Err(FmError::Config(format!(
+                "{field} must be {expected}, found {found}"
+            )))
+        };
+        if t.steps == 0 {
+            return bad("train.steps", "at least 1", "0".into());
+        }
+        if t.batch == 0 {
+            return bad("train.batch", "at least 1", "0".into());
+        }
+        if !(t.lr.is_finite() && t.lr > 0.0) {
+            return bad("train.lr", "finite and > 0", t.lr.to_string());
+        }
+        t.lr_schedule
+            .validate()
+            .map_err(|e| FmError::Config(format!("train.lr_schedule: {e}")))?;
+        if !(t.grad_clip.is_finite() && t.grad_clip >= 0.0) {
+            return bad(
+                "train.grad_clip",
+                "finite and >= 0",
+                t.grad_clip.to_string(),
+            );
+        }
+        for (name, b) in [
+            ("train.adam_beta1", t.adam_beta1),
+            ("train.adam_beta2", t.adam_beta2),
+        ] {
+            if !(0.0..1.0).contains(&b) {
+                return bad(name, "in [0, 1)", b.to_string());
+            }
+        }
+        if !(t.adam_eps.is_finite() && t.adam_eps > 0.0) {
+            return bad("train.adam_eps", "finite and > 0", t.adam_eps.to_string());
+        }
+        if t.checkpoint_every == 0 {
+            return bad("train.checkpoint_every", "at least 1", "0".into());
+        }
+        if t.keep_checkpoints == 0 {
+            return bad("train.keep_checkpoints", "at least 1", "0".into());
+        }
+        if t.log_every == 0 {
+            return bad("train.log_every", "at least 1", "0".into());
+        }
+        if self.sample.steps == 0 {
+            return bad("sample.steps", "at least 1", "0".into());
+        }
+        if self.sample.batch == 0 {
+            return bad("sample.batch", "at least 1", "0".into());
+        }
+        self.noise
+            .kind
+            .validate()
+            .map_err(|e| FmError::Config(format!("noise.kind: {e}")))?;
+        if let NoiseScale::Factor(x) = self.noise.scale {
+            if !(x.is_finite() && x > 0.0) {
+                return bad("noise.scale", "finite and > 0", x.to_string());
+            }
+        }
+        // sizes and head/channel consistency (with one channel as a stand-in)
+        self.model.net_config(1)?;
+        Ok(())
+    }
+
+    /// Parses TOML text; `origin` names the text in errors (a file name).
+    ///
+    /// # Errors
+    /// [`FmError::Format`] with the parser's message (line, column, and the
+    /// unknown or ill-typed field), or [`FmError::Config`] from
+    /// [`RunConfig::validate`] prefixed with `origin`.
+    pub fn from_toml_str(text: &str, origin: impl AsRef<Path>) -> Result<Self> {
+        let origin = origin.as_ref();
+        let cfg: Self = toml::from_str(text)
+            .map_err(|e| FmError::format(origin, format!("invalid run configuration: {e}")))?;
+        cfg.validate().map_err(|e| match e {
+            FmError::Config(m) => FmError::format(origin, m),
+            other => other,
+        })?;
+        Ok(cfg)
+    }
+
+    /// Reads a TOML file.
+    ///
+    /// # Errors
+    /// [`FmError::Io`] if it cannot be read; otherwise as
+    /// [`RunConfig::from_toml_str`], naming the file.
+    pub fn from_toml_file(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// The configuration as TOML (every field written, defaults included).
+    ///
+    /// # Errors
+    /// [`FmError::Config`] if a value cannot be written as TOML (a seed
+    /// above `i64::MAX`).
+    pub fn to_toml_string(&self) -> Result<String> {
+        toml::to_string(self).map_err(|e| {
+            FmError::Config(format!("cannot write the run configuration as TOML: {e}"))
+        })
+    }
+
+    /// Writes [`RunConfig::to_toml_string`] to `path` atomically (a
+    /// temporary file in the same folder, then a rename).
+    ///
+    /// # Errors
+    /// [`FmError::Io`] naming the file.
+    pub fn write_toml_file(&self, path: impl AsRef<Path>) -> Result<()> {
+        crate::checkpoint::write_atomic(path.as_ref(), self.to_toml_string()?.as_bytes())
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn schedules_give_the_documented_rates() {
+        let paper = RunConfig::default().train;
+        assert_eq!(paper.lr_at(0), 5e-4);
+        assert_eq!(paper.lr_at(39_999), 5e-4);
+        assert_eq!(paper.lr_at(40_000), 1e-4);
+        let d = LrSchedule::Decay {
+            factor: 0.2,
+            at: vec![40, 160],
+        };
+        assert_eq!(d.lr(1.0, 39), 1.0);
+        assert_eq!(d.lr(1.0, 40), 0.2);
+        assert!((d.lr(1.0, 200) - 0.04).abs() < 1e-15);
+        assert_eq!(LrSchedule::constant().lr(3.0, 1_000_000), 3.0);
+    }
+
+    #[test]
+    fn presets_validate_and_roundtrip() {
+        for name in PRESETS {
+            let c = RunConfig::preset(name).unwrap();
+            c.validate().unwrap();
+            let text = c.to_toml_string().unwrap();
+            assert_eq!(RunConfig::from_toml_str(&text, "x").unwrap(), c, "{text}");
+        }
+        assert_eq!(
+            RunConfig::preset("paper")
+                .unwrap()
+                .model
+                .net_config(3)
+                .unwrap()
+                .num_parameters(),
+            1_369_600
+        );
+        assert!(RunConfig::preset("gpu").is_err());
+    }
+}

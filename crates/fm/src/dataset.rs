@@ -1,1 +1,605 @@
 //! On-disk datasets of signals over one mesh.
+//!
+//! A dataset is a folder with three files:
+//!
+//! | file | contents |
+//! |---|---|
+//! | [`MESH_FILE`] (`mesh.ply`) | the mesh, binary little-endian PLY with `double` coordinates (exact round trip; readable by [`mfm_geometry::io::read_mesh`], MeshLab, ParaView, PyVista) |
+//! | [`SIGNALS_FILE`] (`signals.npy`) | the signals: NumPy `.npy`, dtype `<f4` (little-endian `f32`), C order, shape `[N, V, C]` (`V` the mesh's vertex count, `C` channels per vertex) |
+//! | [`MANIFEST_FILE`] (`manifest.json`) | a [`Manifest`]: format version, generator name and parameters, `N`/`V`/`C`, seed, the version of the tool that wrote it, free-form provenance |
+//!
+//! [`Dataset::write`] writes all three into a temporary folder next to the
+//! destination and renames it into place, so a failed or interrupted write
+//! never leaves a half-written dataset; it refuses to replace an existing,
+//! non-empty folder unless [`WriteOptions::overwrite`] is set.
+//! [`Dataset::open`] checks everything before returning: that the files
+//! exist, that the manifest parses and has a known format version, that the
+//! mesh reads, that the `.npy` header has the right dtype, order and rank,
+//! that its shape agrees with the mesh and the manifest, and that the file is
+//! long enough to hold the array. Errors name the file at fault.
+//!
+//! A [`Dataset`] does not keep the signals in memory: as a
+//! [`SignalSource`] it reads only the requested rows, seeking to
+//! `header length + row * V * C * 4` (runs of consecutive rows are read in
+//! one go), so training can stream batches from a dataset larger than RAM.
+//! [`Dataset::load_all`] reads everything when that is what is wanted.
+//!
+//! # Example
+//! ```
+//! use mfm_fm::dataset::{Dataset, Manifest};
+//! use mfm_fm::{InMemorySignals, SignalSource};
+//! use mfm_geometry::procedural;
+//! let dir = std::env::temp_dir().join(format!("mfm-dataset-doc-{}", std::process::id()));
+//! let mesh = procedural::icosphere(1); // 42 vertices
+//! let signals = InMemorySignals::new(vec![0.5; 3 * 42], 3, 42, 1).unwrap();
+//! let manifest = Manifest::new("constant", serde_json::json!({ "value": 0.5 })).with_seed(7);
+//! let ds = Dataset::write(&dir, &mesh, &signals, manifest).unwrap();
+//! assert_eq!((ds.len(), ds.num_vertices(), ds.channels()), (3, 42, 1));
+//! let reopened = Dataset::open(&dir).unwrap();
+//! let mut row = vec![0.0f32; 42];
+//! reopened.read_into(&[2], &mut row).unwrap();
+//! assert_eq!(row, vec![0.5; 42]);
+//! std::fs::remove_dir_all(&dir).unwrap();
+//! ```
+
+use std::fs::File;
+use std::io::{self, BufReader, BufWriter, Read, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use mfm_geometry::TriMesh;
+use mfm_geometry::io::{read_mesh, write_ply};
+use npyz::WriterBuilder;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{FmError, Result};
+use crate::signals::{InMemorySignals, SignalSource};
+
+/// Name of the mesh file inside a dataset folder.
+pub const MESH_FILE: &str = "mesh.ply";
+/// Name of the signal array inside a dataset folder.
+pub const SIGNALS_FILE: &str = "signals.npy";
+/// Name of the manifest inside a dataset folder.
+pub const MANIFEST_FILE: &str = "manifest.json";
+/// The manifest format version this code writes (and the newest it reads).
+pub const FORMAT_VERSION: u32 = 1;
+
+/// The `.npy` dtype of the signals: little-endian `f32`.
+const DTYPE: &str = "<f4";
+/// Bytes per value.
+const VALUE_BYTES: u64 = 4;
+/// Largest number of bytes read at once by [`Dataset::read_into`].
+const READ_CHUNK_BYTES: usize = 1 << 22;
+
+/// What a dataset is and where it came from, stored as `manifest.json`.
+///
+/// `num_signals`, `num_vertices` and `channels` are filled in by
+/// [`Dataset::write`] from the data; the rest is the caller's.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// Version of this format ([`FORMAT_VERSION`] when written by this code).
+    pub format_version: u32,
+    /// Name of the generator that made the signals (e.g. `"gmm"`).
+    pub generator: String,
+    /// The generator's parameters, as JSON (e.g. a serialized
+    /// [`GmmConfig`](crate::gmm::GmmConfig)).
+    #[serde(default)]
+    pub generator_params: serde_json::Value,
+    /// `N`: number of signals.
+    pub num_signals: usize,
+    /// `V`: vertices per signal (the mesh's vertex count).
+    pub num_vertices: usize,
+    /// `C`: channels per vertex.
+    pub channels: usize,
+    /// The random seed the generator used, if any.
+    #[serde(default)]
+    pub seed: Option<u64>,
+    /// The software that wrote the dataset and its version
+    /// (`"mfm-fm <version>"` by default).
+    pub tool_version: String,
+    /// Free-form provenance (command line, source mesh, date, notes).
+    #[serde(default)]
+    pub provenance: String,
+}
+
+impl Manifest {
+    /// A manifest for `generator` with `generator_params`, no seed, empty
+    /// provenance, this crate as the tool, and sizes to be filled in by
+    /// [`Dataset::write`].
+    pub fn new(generator: impl Into<String>, generator_params: serde_json::Value) -> Self {
+        Self {
+            format_version: FORMAT_VERSION,
+            generator: generator.into(),
+            generator_params,
+            num_signals: 0,
+            num_vertices: 0,
+            channels: 0,
+            seed: None,
+            tool_version: concat!("mfm-fm ", env!("CARGO_PKG_VERSION")).to_string(),
+            provenance: String::new(),
+        }
+    }
+
+    /// Sets the seed.
+    #[must_use]
+    pub fn with_seed(mut self, seed: u64) -> Self {
+        self.seed = Some(seed);
+        self
+    }
+
+    /// Sets the free-form provenance text.
+    #[must_use]
+    pub fn with_provenance(mut self, provenance: impl Into<String>) -> Self {
+        self.provenance = provenance.into();
+        self
+    }
+}
+
+/// Options of [`Dataset::write_with`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WriteOptions {
+    /// Replace an existing non-empty destination folder (its contents are
+    /// deleted once the new dataset is in place). Default `false`.
+    pub overwrite: bool,
+}
+
+/// An opened, validated dataset folder (see the [module docs](self)).
+///
+/// Holds the mesh and the manifest; reads signals from disk on demand.
+#[derive(Clone, Debug)]
+pub struct Dataset {
+    dir: PathBuf,
+    mesh: TriMesh,
+    manifest: Manifest,
+    signals_path: PathBuf,
+    data_offset: u64,
+    len: usize,
+    vertices: usize,
+    channels: usize,
+}
+
+impl Dataset {
+    /// Writes `mesh`, `signals` and `manifest` as a dataset folder `dir`
+    /// (atomically; refuses a non-empty existing `dir`) and opens it.
+    ///
+    /// The manifest's sizes are set from `signals`.
+    ///
+    /// # Errors
+    /// [`FmError::SizeMismatch`] if the signals are not on the mesh;
+    /// [`FmError::Io`] if `dir` is a non-empty folder (or not a folder), or a
+    /// file cannot be written; [`FmError::WriteMesh`].
+    pub fn write(
+        dir: impl AsRef<Path>,
+        mesh: &TriMesh,
+        signals: &InMemorySignals,
+        manifest: Manifest,
+    ) -> Result<Self> {
+        Self::write_with(dir, mesh, signals, manifest, WriteOptions::default())
+    }
+
+    /// [`Dataset::write`] with explicit [`WriteOptions`].
+    ///
+    /// # Errors
+    /// As [`Dataset::write`] (a non-empty `dir` is replaced when
+    /// `options.overwrite` is set).
+    pub fn write_with(
+        dir: impl AsRef<Path>,
+        mesh: &TriMesh,
+        signals: &InMemorySignals,
+        mut manifest: Manifest,
+        options: WriteOptions,
+    ) -> Result<Self> {
+        let dir = dir.as_ref();
+        if signals.num_vertices() != mesh.num_vertices() {
+            return Err(FmError::SizeMismatch {
+                what: "vertices per signal".into(),
+                expected: mesh.num_vertices(),
+                found: signals.num_vertices(),
+            });
+        }
+        manifest.num_signals = signals.len();
+        manifest.num_vertices = signals.num_vertices();
+        manifest.channels = signals.channels();
+
+        let existing = inspect_destination(dir)?;
+        if existing == Destination::NonEmpty && !options.overwrite {
+            return Err(FmError::io(
+                dir,
+                io::Error::new(
+                    io::ErrorKind::AlreadyExists,
+                    "the folder exists and is not empty; refusing to overwrite it \
+                     (ask for overwrite to replace it)",
+                ),
+            ));
+        }
+        let parent = parent_of(dir);
+        std::fs::create_dir_all(&parent).map_err(|e| FmError::io(&parent, e))?;
+        let temp = sibling(dir, "tmp");
+        std::fs::create_dir(&temp).map_err(|e| FmError::io(&temp, e))?;
+        if let Err(e) = write_files(&temp, mesh, signals, &manifest) {
+            let _ = std::fs::remove_dir_all(&temp);
+            return Err(e);
+        }
+        let swapped = match existing {
+            Destination::Missing => std::fs::rename(&temp, dir).map_err(|e| FmError::io(dir, e)),
+            Destination::Empty => std::fs::remove_dir(dir)
+                .and_then(|()| std::fs::rename(&temp, dir))
+                .map_err(|e| FmError::io(dir, e)),
+            Destination::NonEmpty => {
+                let old = sibling(dir, "old");
+                std::fs::rename(dir, &old)
+                    .map_err(|e| FmError::io(dir, e))
+                    .and_then(|()| {
+                        std::fs::rename(&temp, dir).map_err(|e| {
+                            // put the previous dataset back
+                            let _ = std::fs::rename(&old, dir);
+                            FmError::io(dir, e)
+                        })
+                    })
+                    .map(|()| {
+                        let _ = std::fs::remove_dir_all(&old);
+                    })
+            }
+        };
+        if let Err(e) = swapped {
+            let _ = std::fs::remove_dir_all(&temp);
+            return Err(e);
+        }
+        if let Ok(p) = File::open(&parent) {
+            // make the rename durable where the platform allows syncing a folder
+            let _ = p.sync_all();
+        }
+        Self::open(dir)
+    }
+
+    /// Opens and validates the dataset folder `dir` (see the
+    /// [module docs](self) for what is checked). Reads the manifest, the mesh
+    /// and the `.npy` header; not the signals.
+    ///
+    /// # Errors
+    /// [`FmError::Io`] for a missing or unreadable file, [`FmError::Format`]
+    /// (naming the file) for a malformed manifest, an unsupported format
+    /// version, a wrong dtype, order or shape, sizes that disagree between the
+    /// files, or a truncated array; [`FmError::ReadMesh`] for a bad mesh.
+    pub fn open(dir: impl AsRef<Path>) -> Result<Self> {
+        let dir = dir.as_ref().to_path_buf();
+        if !dir.is_dir() {
+            return Err(FmError::io(
+                &dir,
+                io::Error::new(io::ErrorKind::NotFound, "no such dataset folder"),
+            ));
+        }
+        let manifest_path = dir.join(MANIFEST_FILE);
+        let text = std::fs::read(&manifest_path).map_err(|e| FmError::io(&manifest_path, e))?;
+        let manifest: Manifest = serde_json::from_slice(&text).map_err(|e| {
+            FmError::format(&manifest_path, format!("not a valid dataset manifest: {e}"))
+        })?;
+        if manifest.format_version == 0 || manifest.format_version > FORMAT_VERSION {
+            return Err(FmError::format(
+                &manifest_path,
+                format!(
+                    "format version {} is not supported (this build reads versions 1 to {FORMAT_VERSION})",
+                    manifest.format_version
+                ),
+            ));
+        }
+
+        let mesh_path = dir.join(MESH_FILE);
+        if !mesh_path.is_file() {
+            return Err(FmError::io(
+                &mesh_path,
+                io::Error::new(
+                    io::ErrorKind::NotFound,
+                    "the dataset's mesh file is missing",
+                ),
+            ));
+        }
+        let mesh = read_mesh(&mesh_path)?;
+
+        let signals_path = dir.join(SIGNALS_FILE);
+        let header = read_npy_header(&signals_path)?;
+        let [len, vertices, channels] = header.shape;
+        let fmt = |message: String| FmError::format(&signals_path, message);
+        if vertices != mesh.num_vertices() {
+            return Err(fmt(format!(
+                "the array has shape [{len}, {vertices}, {channels}], but {MESH_FILE} has {} vertices",
+                mesh.num_vertices()
+            )));
+        }
+        if [len, vertices, channels]
+            != [
+                manifest.num_signals,
+                manifest.num_vertices,
+                manifest.channels,
+            ]
+        {
+            return Err(fmt(format!(
+                "the array has shape [{len}, {vertices}, {channels}], but {MANIFEST_FILE} says [{}, {}, {}]",
+                manifest.num_signals, manifest.num_vertices, manifest.channels
+            )));
+        }
+        Ok(Self {
+            dir,
+            mesh,
+            manifest,
+            signals_path,
+            data_offset: header.data_offset,
+            len,
+            vertices,
+            channels,
+        })
+    }
+
+    /// The dataset folder.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// The mesh every signal lives on.
+    pub fn mesh(&self) -> &TriMesh {
+        &self.mesh
+    }
+
+    /// The manifest.
+    pub fn manifest(&self) -> &Manifest {
+        &self.manifest
+    }
+
+    /// Reads every signal into memory.
+    ///
+    /// # Errors
+    /// As [`SignalSource::read_into`].
+    pub fn load_all(&self) -> Result<InMemorySignals> {
+        let total = self
+            .len
+            .checked_mul(self.row_values())
+            .ok_or_else(|| FmError::format(&self.signals_path, "the array is too large"))?;
+        let mut data = vec![0.0f32; total];
+        self.read_run(0, &mut data)?;
+        InMemorySignals::new(data, self.len, self.vertices, self.channels)
+    }
+
+    /// Values per signal (`V x C`).
+    fn row_values(&self) -> usize {
+        self.vertices * self.channels
+    }
+
+    /// Reads `out.len() / (V C)` consecutive rows from `first` on.
+    fn read_run_from(&self, file: &mut File, first: usize, out: &mut [f32]) -> Result<()> {
+        let offset = self.data_offset + first as u64 * self.row_values() as u64 * VALUE_BYTES;
+        file.seek(SeekFrom::Start(offset))
+            .map_err(|e| FmError::io(&self.signals_path, e))?;
+        let mut bytes = vec![0u8; (out.len() * VALUE_BYTES as usize).min(READ_CHUNK_BYTES)];
+        for chunk in out.chunks_mut(READ_CHUNK_BYTES / VALUE_BYTES as usize) {
+            let buf = &mut bytes[..chunk.len() * VALUE_BYTES as usize];
+            file.read_exact(buf).map_err(|e| {
+                if e.kind() == io::ErrorKind::UnexpectedEof {
+                    FmError::format(
+                        &self.signals_path,
+                        "the file ended before the requested rows (truncated after it was opened?)",
+                    )
+                } else {
+                    FmError::io(&self.signals_path, e)
+                }
+            })?;
+            for (x, b) in chunk.iter_mut().zip(buf.chunks_exact(VALUE_BYTES as usize)) {
+                *x = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+            }
+        }
+        Ok(())
+    }
+
+    /// [`Dataset::read_run_from`] on a freshly opened file.
+    fn read_run(&self, first: usize, out: &mut [f32]) -> Result<()> {
+        let mut file =
+            File::open(&self.signals_path).map_err(|e| FmError::io(&self.signals_path, e))?;
+        self.read_run_from(&mut file, first, out)
+    }
+}
+
+impl SignalSource for Dataset {
+    fn len(&self) -> usize {
+        self.len
+    }
+
+    fn num_vertices(&self) -> usize {
+        self.vertices
+    }
+
+    fn channels(&self) -> usize {
+        self.channels
+    }
+
+    /// Reads the rows `indices` from `signals.npy` (opening it once per call,
+    /// one seek and one read per run of consecutive indices).
+    fn read_into(&self, indices: &[usize], out: &mut [f32]) -> Result<()> {
+        let n = self.row_values();
+        if out.len() != indices.len() * n {
+            return Err(FmError::SizeMismatch {
+                what: "output buffer".into(),
+                expected: indices.len() * n,
+                found: out.len(),
+            });
+        }
+        if let Some(&bad) = indices.iter().find(|&&i| i >= self.len) {
+            return Err(FmError::SizeMismatch {
+                what: "signal index".into(),
+                expected: self.len,
+                found: bad,
+            });
+        }
+        if indices.is_empty() || n == 0 {
+            return Ok(());
+        }
+        let mut file =
+            File::open(&self.signals_path).map_err(|e| FmError::io(&self.signals_path, e))?;
+        let mut start = 0;
+        while start < indices.len() {
+            let mut end = start + 1;
+            while end < indices.len() && indices[end] == indices[end - 1] + 1 {
+                end += 1;
+            }
+            self.read_run_from(&mut file, indices[start], &mut out[start * n..end * n])?;
+            start = end;
+        }
+        Ok(())
+    }
+}
+
+/// What is at a write destination.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Destination {
+    Missing,
+    Empty,
+    NonEmpty,
+}
+
+fn inspect_destination(dir: &Path) -> Result<Destination> {
+    match std::fs::metadata(dir) {
+        Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(Destination::Missing),
+        Err(e) => Err(FmError::io(dir, e)),
+        Ok(meta) if !meta.is_dir() => Err(FmError::io(
+            dir,
+            io::Error::new(
+                io::ErrorKind::AlreadyExists,
+                "exists and is not a folder; a dataset is written as a folder",
+            ),
+        )),
+        Ok(_) => {
+            let mut entries = std::fs::read_dir(dir).map_err(|e| FmError::io(dir, e))?;
+            Ok(if entries.next().is_some() {
+                Destination::NonEmpty
+            } else {
+                Destination::Empty
+            })
+        }
+    }
+}
+
+/// The folder that holds `dir` (`.` for a bare name).
+fn parent_of(dir: &Path) -> PathBuf {
+    match dir.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// A fresh hidden path next to `dir`: `.NAME.KIND-PID-COUNTER`.
+fn sibling(dir: &Path, kind: &str) -> PathBuf {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let name = dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "dataset".into());
+    let count = COUNTER.fetch_add(1, Ordering::Relaxed);
+    parent_of(dir).join(format!(".{name}.{kind}-{}-{count}", std::process::id()))
+}
+
+/// Writes the three files into `dir` (an empty folder).
+fn write_files(
+    dir: &Path,
+    mesh: &TriMesh,
+    signals: &InMemorySignals,
+    manifest: &Manifest,
+) -> Result<()> {
+    write_ply(dir.join(MESH_FILE), mesh, &[])?;
+
+    let path = dir.join(SIGNALS_FILE);
+    let io_err = |e| FmError::io(&path, e);
+    let file = File::create(&path).map_err(io_err)?;
+    let dtype = npyz::DType::Plain(
+        DTYPE
+            .parse()
+            .map_err(|e| FmError::format(&path, format!("internal dtype {DTYPE}: {e}")))?,
+    );
+    let shape = [
+        signals.len() as u64,
+        signals.num_vertices() as u64,
+        signals.channels() as u64,
+    ];
+    let mut writer = npyz::WriteOptions::<f32>::new()
+        .dtype(dtype)
+        .shape(&shape)
+        .writer(BufWriter::new(&file))
+        .begin_nd()
+        .map_err(io_err)?;
+    writer
+        .extend(signals.data().iter().copied())
+        .map_err(io_err)?;
+    writer.finish().map_err(io_err)?;
+    file.sync_all().map_err(io_err)?;
+
+    let path = dir.join(MANIFEST_FILE);
+    let text = serde_json::to_vec_pretty(manifest)
+        .map_err(|e| FmError::format(&path, format!("cannot serialize the manifest: {e}")))?;
+    let mut file = File::create(&path).map_err(|e| FmError::io(&path, e))?;
+    file.write_all(&text)
+        .and_then(|()| file.write_all(b"\n"))
+        .and_then(|()| file.sync_all())
+        .map_err(|e| FmError::io(&path, e))?;
+    Ok(())
+}
+
+/// The parts of a `.npy` header a dataset needs.
+struct NpyInfo {
+    shape: [usize; 3],
+    data_offset: u64,
+}
+
+/// Reads and checks the header of `signals.npy`: dtype `<f4`, C order,
+/// rank 3, and a file long enough for the whole array.
+fn read_npy_header(path: &Path) -> Result<NpyInfo> {
+    let file = File::open(path).map_err(|e| FmError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| FmError::io(path, e))?.len();
+    let mut reader = BufReader::new(file);
+    let header = npyz::NpyHeader::from_reader(&mut reader)
+        .map_err(|e| FmError::format(path, format!("not a valid .npy file: {e}")))?;
+    let data_offset = reader.stream_position().map_err(|e| FmError::io(path, e))?;
+    let dtype = header.dtype();
+    let dtype_ok = matches!(&dtype, npyz::DType::Plain(t) if t.to_string() == DTYPE);
+    if !dtype_ok {
+        return Err(FmError::format(
+            path,
+            format!(
+                "dtype is {}, expected '{DTYPE}' (little-endian float32)",
+                dtype.descr()
+            ),
+        ));
+    }
+    if header.order() != npyz::Order::C {
+        return Err(FmError::format(
+            path,
+            "the array is in Fortran order, expected C order",
+        ));
+    }
+    let shape = header.shape();
+    let &[n, v, c] = shape else {
+        return Err(FmError::format(
+            path,
+            format!("the array has shape {shape:?}, expected 3 axes [N, V, C]"),
+        ));
+    };
+    let to_usize = |x: u64| {
+        usize::try_from(x)
+            .map_err(|_| FmError::format(path, format!("axis length {x} is too large")))
+    };
+    let needed = n
+        .checked_mul(v)
+        .and_then(|x| x.checked_mul(c))
+        .and_then(|x| x.checked_mul(VALUE_BYTES))
+        .ok_or_else(|| FmError::format(path, format!("shape {shape:?} overflows")))?;
+    let available = file_len.saturating_sub(data_offset);
+    if available < needed {
+        return Err(FmError::format(
+            path,
+            format!(
+                "truncated: shape [{n}, {v}, {c}] needs {needed} bytes of data after the header, \
+                 the file has {available}"
+            ),
+        ));
+    }
+    Ok(NpyInfo {
+        shape: [to_usize(n)?, to_usize(v)?, to_usize(c)?],
+        data_offset,
+    })
+}

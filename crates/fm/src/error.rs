@@ -45,6 +45,15 @@ pub enum FmError {
     /// A mesh could not be written.
     #[error(transparent)]
     WriteMesh(#[from] mfm_geometry::io::WriteError),
+    /// A mesh could not be built or processed (procedural construction,
+    /// refinement, decimation), e.g. for an experiment's train/test meshes.
+    #[error("{what}: {source}")]
+    MeshProcessing {
+        /// The step that failed.
+        what: String,
+        /// The geometry crate's error.
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
     /// The mesh operators could not be built.
     #[error("mesh operators: {0}")]
     Operators(#[from] mfm_geometry::operators::OperatorError),

@@ -1,1 +1,411 @@
-//! ODE sampling.
+//! Generating signals with a trained model on any triangulation.
+//!
+//! A sample starts from noise `f_0` drawn **on the target mesh** with the
+//! run's noise kind and scale ([`FlowSpec`]) and integrates the learned
+//! velocity `df/dt = v(f, t)` from `t = 0` to `t = 1` with `S` steps of size
+//! `h = 1 / S`:
+//! - midpoint (the paper's): `f <- f + h v(f + h/2 v(f, t), t + h/2)`, two
+//!   network evaluations per step, error `O(h^2)`;
+//! - Euler: `f <- f + h v(f, t)`, one evaluation, error `O(h)`.
+//!
+//! `v(f, t)` is the network's vertex output plus the run's constant
+//! per-channel velocity offset, with the network conditioned on `t` (and the
+//! target mesh's vertex positions when the run was trained that way).
+//!
+//! Entry points: [`Sampler::load`] (a run folder: its final model, or its
+//! newest valid checkpoint), [`Sampler::sample`] (`[N, V, C]` values for a
+//! mesh), and the lower-level [`Sampler::prepare`],
+//! [`Sampler::sample_on`], [`Sampler::noise`], [`Sampler::integrate`].
+//!
+//! Sample `i` of seed `s` starts from noise sample `i` of the noise sequence
+//! of `s` on the target mesh, whatever the batch it is generated in. Cost per
+//! sample: `S` (Euler) or `2 S` (midpoint) network forward passes, batched
+//! `batch` samples at a time (memory grows linearly with the batch).
+
+use std::path::Path;
+use std::time::Instant;
+
+use mfm_geometry::TriMesh;
+use mfm_net::{MeshTensors, PoissonNet};
+use mfm_noise::NoiseSampler;
+use tch::{Device, Kind, Tensor};
+
+use crate::checkpoint::{self, FLOW_FILE, FlowSpec, WEIGHTS_FILE};
+use crate::config::{DeviceChoice, OdeMethod, SampleConfig};
+use crate::error::{FmError, Result};
+
+/// How to integrate: steps, method, batch size.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SampleOptions {
+    /// ODE steps `S` (at least 1).
+    pub steps: usize,
+    /// Integrator.
+    pub method: OdeMethod,
+    /// Samples integrated together (at least 1).
+    pub batch: usize,
+}
+
+impl Default for SampleOptions {
+    fn default() -> Self {
+        Self::from(&SampleConfig::default())
+    }
+}
+
+impl From<&SampleConfig> for SampleOptions {
+    fn from(c: &SampleConfig) -> Self {
+        Self {
+            steps: c.steps,
+            method: c.method,
+            batch: c.batch,
+        }
+    }
+}
+
+/// Generated signals and how long they took.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Samples {
+    /// Values, row-major `[samples, vertices, channels]`.
+    pub data: Vec<f32>,
+    /// Number of samples `N`.
+    pub samples: usize,
+    /// Vertices `V` of the target mesh.
+    pub vertices: usize,
+    /// Channels `C`.
+    pub channels: usize,
+    /// Wall seconds for everything (noise and integration).
+    pub seconds: f64,
+    /// Of which drawing the noise.
+    pub noise_seconds: f64,
+}
+
+impl Samples {
+    /// Wall seconds per sample (`seconds / samples`; 0 for no samples).
+    pub fn seconds_per_sample(&self) -> f64 {
+        if self.samples == 0 {
+            0.0
+        } else {
+            self.seconds / self.samples as f64
+        }
+    }
+
+    /// Sample `i` (`V x C` values).
+    pub fn sample(&self, i: usize) -> &[f32] {
+        let n = self.vertices * self.channels;
+        &self.data[i * n..(i + 1) * n]
+    }
+}
+
+/// A target mesh prepared for sampling: the network's operators (a
+/// factorization of `L + eps I`), the noise sampler (a factorization for
+/// Matérn kinds) and the vertex positions. Reuse it for several calls.
+#[derive(Debug)]
+pub struct TargetMesh {
+    mesh: MeshTensors,
+    noise: NoiseSampler,
+    xyz: Tensor,
+}
+
+impl TargetMesh {
+    /// The network's view of the mesh.
+    pub fn mesh_tensors(&self) -> &MeshTensors {
+        &self.mesh
+    }
+
+    /// The noise sampler of the mesh.
+    pub fn noise_sampler(&self) -> &NoiseSampler {
+        &self.noise
+    }
+
+    /// Number of vertices.
+    pub fn num_vertices(&self) -> usize {
+        self.mesh.num_vertices()
+    }
+}
+
+/// Vertex positions as an `f32` tensor `[1, V, 3]` on `device`.
+pub(crate) fn positions_tensor(mesh: &TriMesh, device: Device) -> Tensor {
+    let flat: Vec<f32> = mesh
+        .positions()
+        .iter()
+        .flat_map(|p| p.map(|x| x as f32))
+        .collect();
+    Tensor::from_slice(&flat)
+        .reshape([1, mesh.num_vertices() as i64, 3])
+        .to_device(device)
+}
+
+/// The conditioning of a batch: `t: [B]` broadcast to `[B, V, 1]`, preceded
+/// by the positions `xyz: [1, V, 3]` when the flow is conditioned on them
+/// (`[B, V, 4]` = `[x, y, z, t]`).
+pub(crate) fn conditioning(flow: &FlowSpec, xyz: &Tensor, t: &Tensor) -> Tensor {
+    let s = xyz.size();
+    let (b, v) = (t.size()[0], s[1]);
+    let tt = t.reshape([b, 1, 1]).expand([b, v, 1], false);
+    if flow.condition_on_xyz {
+        Tensor::cat(&[&xyz.expand([b, v, 3], false), &tt], 2)
+    } else {
+        tt.contiguous()
+    }
+}
+
+/// The velocity offset as `[1, 1, C]` on `device` (`None` when all zero).
+pub(crate) fn offset_tensor(flow: &FlowSpec, device: Device) -> Option<Tensor> {
+    if flow.velocity_offset.iter().all(|&x| x == 0.0) {
+        return None;
+    }
+    let c = flow.velocity_offset.len() as i64;
+    Some(
+        Tensor::from_slice(&flow.velocity_offset)
+            .to_kind(Kind::Float)
+            .reshape([1, 1, c])
+            .to_device(device),
+    )
+}
+
+/// A trained model ready to generate: the network and its [`FlowSpec`].
+#[derive(Debug)]
+pub struct Sampler {
+    net: PoissonNet,
+    flow: FlowSpec,
+    offset: Option<Tensor>,
+}
+
+impl Sampler {
+    /// Wraps a network and the flow it was trained with.
+    ///
+    /// # Errors
+    /// [`FmError::SizeMismatch`] when the network's input/output or
+    /// conditioning channels do not fit the spec.
+    pub fn new(net: PoissonNet, flow: FlowSpec) -> Result<Self> {
+        let cfg = net.config();
+        let cond = if flow.condition_on_xyz { 4 } else { 1 };
+        for (what, found, expected) in [
+            ("network input channels", cfg.in_channels, flow.channels),
+            ("network output channels", cfg.out_channels, flow.channels),
+            ("network conditioning channels", cfg.cond_channels, cond),
+            (
+                "velocity offset values",
+                flow.velocity_offset.len(),
+                flow.channels,
+            ),
+        ] {
+            if found != expected {
+                return Err(FmError::SizeMismatch {
+                    what: what.into(),
+                    expected,
+                    found,
+                });
+            }
+        }
+        let offset = offset_tensor(&flow, net.device());
+        Ok(Self { net, flow, offset })
+    }
+
+    /// Loads a trained run: `run_dir/model.safetensors` (the final model)
+    /// with `run_dir/flow.json` when present, otherwise the newest checkpoint
+    /// that passes its integrity check (a warning on standard error names
+    /// each newer one that does not). `device`: `None` picks CUDA when
+    /// available.
+    ///
+    /// # Errors
+    /// [`FmError::Format`] / [`FmError::Io`] naming the file at fault, or
+    /// [`FmError::Config`] when the folder has neither a final model nor a
+    /// checkpoint.
+    pub fn load(run_dir: impl AsRef<Path>, device: Option<Device>) -> Result<Self> {
+        let run_dir = run_dir.as_ref();
+        let weights = run_dir.join(WEIGHTS_FILE);
+        if weights.is_file() {
+            return Self::load_files(&weights, &run_dir.join(FLOW_FILE), device);
+        }
+        let (best, rejected) = checkpoint::newest_valid_checkpoint(run_dir)?;
+        for (dir, err) in &rejected {
+            eprintln!("warning: skipping checkpoint {}: {err}", dir.display());
+        }
+        match best {
+            Some((info, _)) => Self::load_checkpoint(&info.dir, device),
+            None => match rejected.into_iter().next() {
+                Some((_, err)) => Err(err),
+                None => Err(FmError::Config(format!(
+                    "{} has no final model ({WEIGHTS_FILE}) and no checkpoint",
+                    run_dir.display()
+                ))),
+            },
+        }
+    }
+
+    /// Loads one checkpoint folder after checking its files' checksums.
+    ///
+    /// # Errors
+    /// As [`checkpoint::verify_checkpoint`], and network loading errors.
+    pub fn load_checkpoint(dir: impl AsRef<Path>, device: Option<Device>) -> Result<Self> {
+        let dir = dir.as_ref();
+        checkpoint::verify_checkpoint(dir)?;
+        Self::load_files(&dir.join(WEIGHTS_FILE), &dir.join(FLOW_FILE), device)
+    }
+
+    fn load_files(weights: &Path, flow: &Path, device: Option<Device>) -> Result<Self> {
+        let device = match device {
+            Some(d) => d,
+            None => DeviceChoice::Auto.resolve()?,
+        };
+        let flow = FlowSpec::read(flow)?;
+        let net = PoissonNet::load(weights, device)?;
+        Self::new(net, flow)
+    }
+
+    /// The flow spec.
+    pub fn flow(&self) -> &FlowSpec {
+        &self.flow
+    }
+
+    /// The network.
+    pub fn net(&self) -> &PoissonNet {
+        &self.net
+    }
+
+    /// Builds the operators and the noise sampler of a target mesh.
+    ///
+    /// Cost: the mesh operators and two sparse factorizations.
+    ///
+    /// # Errors
+    /// Operator, factorization or noise errors of the mesh.
+    pub fn prepare(&self, mesh: &TriMesh) -> Result<TargetMesh> {
+        Ok(TargetMesh {
+            mesh: MeshTensors::new(mesh)?,
+            noise: NoiseSampler::new(mesh, self.flow.noise)?,
+            xyz: positions_tensor(mesh, self.net.device()),
+        })
+    }
+
+    /// Generates `count` samples on `mesh` from `seed`: `[count, V, C]`.
+    ///
+    /// # Errors
+    /// See [`Sampler::prepare`] and [`Sampler::sample_on`].
+    pub fn sample(
+        &self,
+        mesh: &TriMesh,
+        count: usize,
+        seed: u64,
+        options: &SampleOptions,
+    ) -> Result<Samples> {
+        let target = self.prepare(mesh)?;
+        self.sample_on(&target, 0, count, seed, options)
+    }
+
+    /// Generates samples `first .. first + count` of `seed` on a prepared
+    /// mesh, `options.batch` at a time.
+    ///
+    /// # Errors
+    /// [`FmError::Config`] for zero steps or batch; noise and network errors.
+    pub fn sample_on(
+        &self,
+        target: &TargetMesh,
+        first: usize,
+        count: usize,
+        seed: u64,
+        options: &SampleOptions,
+    ) -> Result<Samples> {
+        if options.steps == 0 || options.batch == 0 {
+            return Err(FmError::Config(format!(
+                "sampling needs at least one step and a batch of at least one, found steps = {} and batch = {}",
+                options.steps, options.batch
+            )));
+        }
+        let (v, c) = (target.num_vertices(), self.flow.channels);
+        let start = Instant::now();
+        let mut noise_seconds = 0.0;
+        let mut data = Vec::with_capacity(count * v * c);
+        let mut done = 0;
+        while done < count {
+            let b = options.batch.min(count - done);
+            let t0 = Instant::now();
+            let x0 = self.noise(target, first + done, b, seed)?;
+            noise_seconds += t0.elapsed().as_secs_f64();
+            let x1 = self.integrate(target, &x0, options)?;
+            let flat = x1.to_device(Device::Cpu).contiguous().view([-1]);
+            let values = Vec::<f32>::try_from(&flat)?;
+            data.extend_from_slice(&values);
+            done += b;
+        }
+        Ok(Samples {
+            data,
+            samples: count,
+            vertices: v,
+            channels: c,
+            seconds: start.elapsed().as_secs_f64(),
+            noise_seconds,
+        })
+    }
+
+    /// The starting noise of samples `first .. first + count` of `seed` on
+    /// the target: `[count, V, C]` `f32` on the network's device (the run's
+    /// noise kind, times its scale).
+    ///
+    /// # Errors
+    /// Noise sampling errors.
+    pub fn noise(
+        &self,
+        target: &TargetMesh,
+        first: usize,
+        count: usize,
+        seed: u64,
+    ) -> Result<Tensor> {
+        let (v, c) = (target.num_vertices() as i64, self.flow.channels);
+        let batch = target.noise.sample_range_f32(first, count, c, seed)?;
+        let scale = self.flow.noise_scale as f32;
+        let mut values = batch.into_data();
+        if scale != 1.0 {
+            values.iter_mut().for_each(|x| *x *= scale);
+        }
+        Ok(Tensor::from_slice(&values)
+            .reshape([count as i64, v, c as i64])
+            .to_device(self.net.device()))
+    }
+
+    /// The velocity `v(x, t)` at time `t` for a batch `x: [B, V, C]` (no
+    /// gradient is recorded).
+    ///
+    /// # Errors
+    /// Network errors (shapes, solves).
+    pub fn velocity(&self, target: &TargetMesh, x: &Tensor, t: f64) -> Result<Tensor> {
+        let b = x.size()[0];
+        let tt = Tensor::full([b], t, (Kind::Float, x.device()));
+        let cond = conditioning(&self.flow, &target.xyz, &tt);
+        let out = tch::no_grad(|| self.net.forward(&target.mesh, x, Some(&cond)))?;
+        Ok(match &self.offset {
+            Some(o) => out.vertex + o,
+            None => out.vertex,
+        })
+    }
+
+    /// Integrates `x0: [B, V, C]` from `t = 0` to `t = 1` with
+    /// `options.steps` steps of `options.method` (see the module docs).
+    ///
+    /// # Errors
+    /// [`FmError::Config`] for zero steps; network errors.
+    pub fn integrate(
+        &self,
+        target: &TargetMesh,
+        x0: &Tensor,
+        options: &SampleOptions,
+    ) -> Result<Tensor> {
+        if options.steps == 0 {
+            return Err(FmError::Config(
+                "sampling needs at least one ODE step".into(),
+            ));
+        }
+        let h = 1.0 / options.steps as f64;
+        let mut x = x0.shallow_clone();
+        for k in 0..options.steps {
+            let t = k as f64 * h;
+            x = match options.method {
+                OdeMethod::Euler => &x + self.velocity(target, &x, t)? * h,
+                OdeMethod::Midpoint => {
+                    let mid = &x + self.velocity(target, &x, t)? * (h / 2.0);
+                    &x + self.velocity(target, &mid, t + h / 2.0)? * h
+                }
+            };
+        }
+        Ok(x)
+    }
+}

@@ -120,6 +120,7 @@ impl SignalSource for InMemorySignals {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

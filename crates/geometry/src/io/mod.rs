@@ -426,8 +426,11 @@ pub fn write_obj(path: impl AsRef<Path>, mesh: &TriMesh) -> Result<(), WriteErro
 
 /// Writes `mesh` as binary little-endian PLY with `double` coordinates, a
 /// `list uchar uint vertex_indices` face property, and one
-/// `property double NAME` per entry of `scalars` (one value per vertex), which
-/// MeshLab, ParaView and PyVista show as vertex fields. Equivalent to
+/// `property double NAME` per entry of `scalars` (one value per vertex).
+/// MeshLab and numpy-based readers (plyfile, `cargo xtask visual-check`) see
+/// them as vertex fields; VTK's PLY reader (PyVista's `pyvista.read`,
+/// ParaView) keeps only the geometry and drops extra vertex properties
+/// (checked with VTK 9.7). Equivalent to
 /// [`write_ply_with`] with [`PlyEncoding::BinaryLittleEndian`].
 ///
 /// # Errors

@@ -1,0 +1,631 @@
+//! Flow matching from the command line: `mfm dataset gmm`, `mfm train`,
+//! `mfm sample`, `mfm eval`.
+
+use crate::mesh_arg::load_mesh;
+use crate::output::write_json;
+use anyhow::{Context, Result, bail};
+use clap::{Args, Subcommand};
+use mfm_fm::checkpoint::CONFIG_FILE;
+use mfm_fm::config::{OdeMethod, RunConfig};
+use mfm_fm::dataset::{Dataset, Manifest};
+use mfm_fm::experiment::GmmMeshes;
+use mfm_fm::gmm::{GenerateOptions, GmmConfig, GmmDistance, GmmGenerator};
+use mfm_fm::metrics::Metrics;
+use mfm_fm::sample::{SampleOptions, Sampler};
+use mfm_fm::train::Trainer;
+use mfm_fm::{InMemorySignals, SignalSource};
+use mfm_geometry::render::{ColorRange, Colormap, GridOptions, Panel, RenderOptions};
+use mfm_geometry::{TriMesh, io, operators, render};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// `mfm dataset ...`.
+#[derive(Subcommand)]
+pub enum DatasetCommand {
+    /// The GMM experiment (after Manifold Diffusion Fields): signals made of
+    /// Gaussian bumps at centers drawn in proportion to vertex mass.
+    /// Writes OUT/train (the training set on the training mesh) and
+    /// OUT/reference (a reference set on a non-uniform test triangulation of
+    /// the same surface), each a dataset folder (mesh, signals.npy,
+    /// manifest.json), and OUT/preview.png.
+    Gmm(GmmArgs),
+}
+
+/// Arguments of `mfm dataset gmm`.
+#[derive(Args)]
+pub struct GmmArgs {
+    /// Output folder (must not exist or be empty).
+    #[arg(long)]
+    out: PathBuf,
+    /// Training mesh, a file or builtin:NAME (default: the built-in blob,
+    /// 2562 vertices, with its test mesh whose x < centroid half is refined
+    /// twice).
+    #[arg(long)]
+    mesh: Option<String>,
+    /// Test mesh for the reference set (default: the training mesh with the
+    /// half x < centroid refined twice).
+    #[arg(long)]
+    test_mesh: Option<String>,
+    /// Training signals.
+    #[arg(long, default_value_t = 1000)]
+    n: usize,
+    /// Reference signals on the test mesh (0: no reference set).
+    #[arg(long, default_value_t = 200)]
+    reference: usize,
+    /// Bumps per signal.
+    #[arg(long, default_value_t = 3)]
+    bumps: usize,
+    /// Bump width relative to sqrt(surface area).
+    #[arg(long, default_value_t = 0.06)]
+    sigma: f64,
+    /// Smallest center separation, in bump widths.
+    #[arg(long, default_value_t = 4.0)]
+    min_separation: f64,
+    /// Use straight-line instead of geodesic (heat method) distance.
+    #[arg(long)]
+    euclidean: bool,
+    /// Seed (the reference set uses its own stream of the same seed).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+/// Arguments of `mfm train`.
+#[derive(Args)]
+pub struct TrainArgs {
+    /// Run configuration (TOML; every field has a default, unknown fields
+    /// are an error). Without it, --preset gives the configuration.
+    #[arg(long, conflicts_with = "preset")]
+    config: Option<PathBuf>,
+    /// Named configuration: `cpu` (minutes on a laptop) or `paper` (the
+    /// paper's recipe, for a GPU).
+    #[arg(long)]
+    preset: Option<String>,
+    /// Dataset folder (overrides the configuration's dataset.path).
+    #[arg(long)]
+    dataset: Option<PathBuf>,
+    /// Run folder: config, log, checkpoints, final model.
+    #[arg(long)]
+    out: PathBuf,
+    /// Total training steps (overrides train.steps).
+    #[arg(long)]
+    steps: Option<u64>,
+    /// Seed (overrides train.seed).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Noise the flow starts from (overrides noise.kind): matern:TAU,
+    /// matern-normalized:C, white, naive, explicit:K:TAU.
+    #[arg(long)]
+    noise: Option<mfm_noise::NoiseKind>,
+    /// Continue the run in --out from its newest valid checkpoint.
+    #[arg(long)]
+    resume: bool,
+    /// No progress bar.
+    #[arg(long)]
+    quiet: bool,
+}
+
+/// Arguments of `mfm sample`.
+#[derive(Args)]
+pub struct SampleArgs {
+    /// Run folder written by `mfm train` (its final model, or its newest
+    /// checkpoint).
+    #[arg(long)]
+    run: PathBuf,
+    /// Mesh to generate on: any triangulation of the training surface.
+    #[arg(long)]
+    mesh: String,
+    /// Number of samples.
+    #[arg(long, default_value_t = 16)]
+    n: usize,
+    /// ODE steps (default: the run's sample.steps).
+    #[arg(long)]
+    steps: Option<usize>,
+    /// Integrator: midpoint or euler (default: the run's).
+    #[arg(long)]
+    method: Option<OdeMethod>,
+    /// Seed of the initial noise.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Output folder: samples.npy [N, V, C] (f32), mesh.ply, the first
+    /// --ply samples as PLY, samples.png, timing.json.
+    #[arg(long)]
+    out: PathBuf,
+    /// How many samples to also write as PLY files.
+    #[arg(long, default_value_t = 4)]
+    ply: usize,
+}
+
+/// Arguments of `mfm eval`.
+#[derive(Args)]
+pub struct EvalArgs {
+    /// Generated samples (.npy [N, V, C], e.g. from `mfm sample`).
+    #[arg(long)]
+    samples: PathBuf,
+    /// Reference dataset folder (its mesh is the mesh the samples live on).
+    #[arg(long)]
+    reference: PathBuf,
+    /// Write the metrics as JSON here.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Render the point-wise means (generated vs reference) to this PNG.
+    #[arg(long)]
+    png: Option<PathBuf>,
+}
+
+/// Runs `mfm dataset gmm`.
+pub fn dataset(cmd: DatasetCommand) -> Result<()> {
+    let DatasetCommand::Gmm(a) = cmd;
+    let config = GmmConfig {
+        bumps: a.bumps,
+        sigma: a.sigma,
+        min_separation: a.min_separation,
+        distance: if a.euclidean {
+            GmmDistance::Euclidean
+        } else {
+            GmmDistance::Geodesic
+        },
+        ..GmmConfig::default()
+    };
+    config.validate()?;
+    if a.n == 0 {
+        bail!("--n must be at least 1");
+    }
+    ensure_empty(&a.out)?;
+    let (train_mesh, test_mesh, source) = match (&a.mesh, &a.test_mesh) {
+        (None, None) => {
+            let m = GmmMeshes::builtin()?;
+            (m.train, m.test, "builtin:blob".to_owned())
+        }
+        (Some(spec), None) => {
+            let m = GmmMeshes::from_base(load_mesh(spec)?, Default::default())?;
+            (m.train, m.test, spec.clone())
+        }
+        (Some(spec), Some(test)) => (load_mesh(spec)?, load_mesh(test)?, spec.clone()),
+        (None, Some(_)) => bail!("--test-mesh needs --mesh (the training mesh)"),
+    };
+    println!(
+        "train mesh: {} vertices, {} faces; test mesh: {} vertices, {} faces",
+        train_mesh.num_vertices(),
+        train_mesh.num_faces(),
+        test_mesh.num_vertices(),
+        test_mesh.num_faces()
+    );
+    let progress = GenerateOptions {
+        progress_bar: true,
+        on_progress: None,
+    };
+    let write = |dir: &Path, mesh: &TriMesh, n: usize, seed: u64, role: &str| -> Result<Dataset> {
+        let generator = GmmGenerator::new(mesh, &config)?;
+        let signals = generator.generate_with(n, seed, &progress)?;
+        let manifest = Manifest::new("gmm", config.manifest_params())
+            .with_seed(seed)
+            .with_provenance(format!("mfm dataset gmm: {role} set on {source}"));
+        Ok(Dataset::write(dir, mesh, &signals, manifest)?)
+    };
+    let t0 = std::time::Instant::now();
+    let train = write(&a.out.join("train"), &train_mesh, a.n, a.seed, "training")?;
+    // A different seed stream for the reference set: its signals are not
+    // copies of training signals on another mesh.
+    let reference_seed = a.seed ^ 0x5eed_0f2e_f5e7;
+    if a.reference > 0 {
+        write(
+            &a.out.join("reference"),
+            &test_mesh,
+            a.reference,
+            reference_seed,
+            "reference",
+        )?;
+    } else {
+        io::write_ply(a.out.join("test_mesh.ply"), &test_mesh, &[])?;
+    }
+    let preview = train.load_all()?;
+    let k = preview.len().min(8);
+    let values: Vec<Vec<f64>> = (0..k).map(|i| channel(&preview, i, 0)).collect();
+    let panels: Vec<Panel<'_>> = values
+        .iter()
+        .enumerate()
+        .map(|(i, v)| Panel::new(&train_mesh, Some(v.as_slice()), format!("signal {i}")))
+        .collect();
+    save_grid(
+        &panels,
+        4,
+        "GMM training signals",
+        ColorRange::Auto,
+        &a.out.join("preview.png"),
+    )?;
+    println!(
+        "wrote {} ({} training signals, {} reference) in {:.1} s",
+        a.out.display(),
+        a.n,
+        a.reference,
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Runs `mfm train`.
+pub fn train(a: TrainArgs) -> Result<()> {
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = Arc::clone(&stop);
+        // A second Ctrl-C while the final checkpoint is written kills the
+        // process as usual.
+        let installed = ctrlc::set_handler(move || {
+            if stop.swap(true, Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+            eprintln!(
+                "\nmfm: stopping after this step and writing a checkpoint (Ctrl-C again to kill)"
+            );
+        });
+        if let Err(e) = installed {
+            eprintln!(
+                "mfm: warning: cannot install the Ctrl-C handler ({e}); Ctrl-C will lose the steps since the last checkpoint"
+            );
+        }
+    }
+    let mut trainer = if a.resume {
+        if a.config.is_some() || a.preset.is_some() || a.noise.is_some() || a.seed.is_some() {
+            bail!(
+                "--resume continues with the run's own {CONFIG_FILE}; drop --config/--preset/--noise/--seed"
+            );
+        }
+        let stored = RunConfig::from_toml_file(a.out.join(CONFIG_FILE))
+            .with_context(|| format!("{} is not a run folder", a.out.display()))?;
+        let dir = dataset_dir(a.dataset.as_deref(), &stored)?;
+        let data = Dataset::open(&dir)?;
+        let mesh = data.mesh().clone();
+        let mut t = Trainer::resume(&a.out, &mesh, Arc::new(data))?;
+        if let Some(r) = t.resumed() {
+            match &r.checkpoint {
+                Some(c) => println!("resuming from {} (step {})", c.display(), r.step),
+                None => println!("no checkpoint yet: starting over"),
+            }
+        }
+        if let Some(steps) = a.steps {
+            t.set_total_steps(steps)?;
+        }
+        t
+    } else {
+        let mut config = match (&a.config, &a.preset) {
+            (Some(path), _) => RunConfig::from_toml_file(path)?,
+            (None, Some(name)) => RunConfig::preset(name)?,
+            (None, None) => bail!("give --config run.toml or --preset cpu|paper"),
+        };
+        if let Some(d) = &a.dataset {
+            config.dataset.path = Some(d.clone());
+        }
+        if let Some(s) = a.steps {
+            config.train.steps = s;
+        }
+        if let Some(s) = a.seed {
+            config.train.seed = s;
+        }
+        if let Some(k) = a.noise {
+            config.noise.kind = k;
+        }
+        let dir = dataset_dir(None, &config)?;
+        let data = Dataset::open(&dir)?;
+        let mesh = data.mesh().clone();
+        println!(
+            "dataset {}: {} signals, {} vertices, {} channels",
+            dir.display(),
+            data.len(),
+            data.num_vertices(),
+            data.channels()
+        );
+        Trainer::new(&a.out, config, &mesh, Arc::new(data))?
+    };
+    println!(
+        "training {} parameters on {:?}, step {} of {}",
+        trainer.net().num_parameters(),
+        trainer.device(),
+        trainer.step(),
+        trainer.config().train.steps
+    );
+    let summary = trainer.run(&stop, !a.quiet)?;
+    println!(
+        "steps {}..{} in {:.1} s ({:.3} s/step), last loss {}",
+        summary.start_step,
+        summary.end_step,
+        summary.seconds,
+        summary.seconds_per_step,
+        summary
+            .last_loss
+            .map_or_else(|| "-".to_owned(), |l| format!("{l:.5}"))
+    );
+    if let Some(m) = &summary.model {
+        println!("final model: {}", m.display());
+    } else if let Some(c) = &summary.checkpoint {
+        println!(
+            "checkpoint: {} (continue with --resume --out {})",
+            c.display(),
+            a.out.display()
+        );
+    }
+    if summary.stopped {
+        std::process::exit(130);
+    }
+    Ok(())
+}
+
+fn dataset_dir(flag: Option<&Path>, config: &RunConfig) -> Result<PathBuf> {
+    match (flag, &config.dataset.path) {
+        (Some(p), _) => Ok(p.to_path_buf()),
+        (None, Some(p)) => Ok(p.clone()),
+        (None, None) => {
+            bail!("no dataset: pass --dataset DIR or set [dataset] path in the configuration")
+        }
+    }
+}
+
+/// Runs `mfm sample`.
+pub fn sample(a: SampleArgs) -> Result<()> {
+    if a.n == 0 {
+        bail!("--n must be at least 1");
+    }
+    let mesh = load_mesh(&a.mesh)?;
+    let sampler = Sampler::load(&a.run, None)?;
+    let run_config = RunConfig::from_toml_file(a.run.join(CONFIG_FILE)).ok();
+    let mut opts = run_config
+        .as_ref()
+        .map(|c| SampleOptions::from(&c.sample))
+        .unwrap_or_default();
+    if let Some(s) = a.steps {
+        if s == 0 {
+            bail!("--steps must be at least 1");
+        }
+        opts.steps = s;
+    }
+    if let Some(m) = a.method {
+        opts.method = m;
+    }
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let samples = sampler.sample(&mesh, a.n, a.seed, &opts)?;
+    let (n, v, c) = (samples.samples, samples.vertices, samples.channels);
+    write_npy_f32(&a.out.join("samples.npy"), &samples.data, &[n, v, c])?;
+    io::write_ply(a.out.join("mesh.ply"), &mesh, &[])?;
+    let signals = InMemorySignals::new(samples.data.clone(), n, v, c)?;
+    for i in 0..a.ply.min(n) {
+        let path = a.out.join(format!("sample_{i:03}.ply"));
+        if c == 3 {
+            // Three channels are vertex positions: write the deformed mesh.
+            let s = signals.signal(i);
+            let positions = s
+                .chunks(3)
+                .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
+                .collect();
+            io::write_ply(&path, &mesh.with_positions(positions)?, &[])?;
+        } else {
+            let columns: Vec<Vec<f64>> = (0..c).map(|k| channel(&signals, i, k)).collect();
+            let names: Vec<String> = (0..c)
+                .map(|k| {
+                    if c == 1 {
+                        "signal".into()
+                    } else {
+                        format!("signal_{k}")
+                    }
+                })
+                .collect();
+            let scalars: Vec<(&str, &[f64])> = names
+                .iter()
+                .zip(&columns)
+                .map(|(name, col)| (name.as_str(), col.as_slice()))
+                .collect();
+            io::write_ply(&path, &mesh, &scalars)?;
+        }
+    }
+    let k = n.min(8);
+    let values: Vec<Vec<f64>> = (0..k).map(|i| channel(&signals, i, 0)).collect();
+    let deformed: Vec<TriMesh> = if c == 3 {
+        (0..k)
+            .map(|i| {
+                let p = signals
+                    .signal(i)
+                    .chunks(3)
+                    .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
+                    .collect();
+                mesh.with_positions(p)
+            })
+            .collect::<Result<_, _>>()?
+    } else {
+        Vec::new()
+    };
+    let panels: Vec<Panel<'_>> = (0..k)
+        .map(|i| {
+            if c == 3 {
+                Panel::new(&deformed[i], None, format!("sample {i}"))
+            } else {
+                Panel::new(&mesh, Some(values[i].as_slice()), format!("sample {i}"))
+            }
+        })
+        .collect();
+    save_grid(
+        &panels,
+        4,
+        &format!("{n} samples on {} vertices", mesh.num_vertices()),
+        ColorRange::Auto,
+        &a.out.join("samples.png"),
+    )?;
+    let timing = serde_json::json!({
+        "samples": n,
+        "vertices": v,
+        "channels": c,
+        "ode_steps": opts.steps,
+        "method": format!("{:?}", opts.method).to_lowercase(),
+        "seconds": samples.seconds,
+        "noise_seconds": samples.noise_seconds,
+        "seconds_per_sample": samples.seconds_per_sample(),
+    });
+    write_json(&a.out.join("timing.json"), &timing)?;
+    println!(
+        "{n} samples on {} vertices in {:.2} s ({:.1} ms per sample, {} {:?} steps) -> {}",
+        v,
+        samples.seconds,
+        samples.seconds_per_sample() * 1e3,
+        opts.steps,
+        opts.method,
+        a.out.display()
+    );
+    Ok(())
+}
+
+/// Runs `mfm eval`.
+pub fn eval(a: EvalArgs) -> Result<()> {
+    let reference = Dataset::open(&a.reference)?;
+    let generated = read_npy_f32(&a.samples)?;
+    if generated.num_vertices() != reference.num_vertices() {
+        bail!(
+            "{}: samples have {} vertices but the reference mesh ({}) has {}; sample on the reference's mesh",
+            a.samples.display(),
+            generated.num_vertices(),
+            a.reference.display(),
+            reference.num_vertices()
+        );
+    }
+    let mesh = reference.mesh().clone();
+    let ops = operators::Operators::new(&mesh)?;
+    let mass: Vec<f64> = ops.mass.clone();
+    let reference = reference.load_all()?;
+    let metrics = Metrics::evaluate(&mass, &generated, &reference)?;
+    println!(
+        "MMD {:.5}  COV {:.3}  1-NNA {:.3}  test error {:.5}  ({} generated, {} reference)",
+        metrics.mmd,
+        metrics.cov,
+        metrics.one_nna,
+        metrics.test_error,
+        metrics.num_generated,
+        metrics.num_reference
+    );
+    if let Some(out) = &a.out {
+        write_json(out, &metrics)?;
+    }
+    if let Some(png) = &a.png {
+        let mean_gen = pointwise_mean(&generated);
+        let mean_ref = pointwise_mean(&reference);
+        let diff: Vec<f64> = mean_gen.iter().zip(&mean_ref).map(|(g, r)| g - r).collect();
+        let panels = [
+            Panel::new(&mesh, Some(mean_gen.as_slice()), "generated mean"),
+            Panel::new(&mesh, Some(mean_ref.as_slice()), "reference mean"),
+        ];
+        save_grid(
+            &panels,
+            2,
+            &format!("point-wise means, test error {:.4}", metrics.test_error),
+            ColorRange::Auto,
+            png,
+        )?;
+        let diff_png = png.with_file_name(format!(
+            "{}_difference.png",
+            png.file_stem().and_then(|s| s.to_str()).unwrap_or("means")
+        ));
+        let mut opts = RenderOptions::with_size(400, 400);
+        opts.colormap = Colormap::CoolWarm;
+        opts.range = ColorRange::Symmetric;
+        opts.colorbar = true;
+        let img = render::render_mesh(&mesh, Some(&diff), &opts)?;
+        render::save_png(&img, &diff_png)?;
+    }
+    Ok(())
+}
+
+/// Point-wise mean of channel 0 over all signals.
+fn pointwise_mean(s: &InMemorySignals) -> Vec<f64> {
+    let (v, c) = (s.num_vertices(), s.channels());
+    let mut mean = vec![0.0; v];
+    for i in 0..s.len() {
+        for (m, x) in mean.iter_mut().zip(s.signal(i).chunks(c)) {
+            *m += f64::from(x[0]);
+        }
+    }
+    let n = s.len().max(1) as f64;
+    mean.iter_mut().for_each(|m| *m /= n);
+    mean
+}
+
+/// Channel `k` of signal `i` as f64.
+fn channel(s: &InMemorySignals, i: usize, k: usize) -> Vec<f64> {
+    s.signal(i)
+        .chunks(s.channels())
+        .map(|x| f64::from(x[k]))
+        .collect()
+}
+
+fn save_grid(
+    panels: &[Panel<'_>],
+    columns: usize,
+    title: &str,
+    range: ColorRange,
+    path: &Path,
+) -> Result<()> {
+    let mut opts = GridOptions {
+        title: Some(title.to_owned()),
+        ..GridOptions::default()
+    };
+    opts.panel.range = range;
+    opts.panel.colorbar = true;
+    let img = render::render_grid(panels, columns, &opts)?;
+    render::save_png(&img, path)?;
+    Ok(())
+}
+
+fn ensure_empty(dir: &Path) -> Result<()> {
+    if let Ok(mut entries) = std::fs::read_dir(dir)
+        && entries.next().is_some()
+    {
+        bail!(
+            "{} exists and is not empty; choose another --out (nothing was overwritten)",
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+fn write_npy_f32(path: &Path, data: &[f32], shape: &[usize]) -> Result<()> {
+    let shape: Vec<u64> = shape.iter().map(|&s| s as u64).collect();
+    crate::output::write_atomic(path, |w| {
+        use npyz::WriterBuilder;
+        let mut npy = npyz::WriteOptions::new()
+            .default_dtype()
+            .shape(&shape)
+            .writer(w)
+            .begin_nd()?;
+        npy.extend(data.iter().copied())?;
+        npy.finish()
+    })
+}
+
+/// Reads a `.npy` of shape `[N, V, C]` or `[N, V]` (f32 or f64) as signals.
+fn read_npy_f32(path: &Path) -> Result<InMemorySignals> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let npy = npyz::NpyFile::new(&bytes[..])
+        .with_context(|| format!("{}: not a .npy file", path.display()))?;
+    let shape: Vec<usize> = npy.shape().iter().map(|&s| s as usize).collect();
+    let (n, v, c) = match shape[..] {
+        [n, v] => (n, v, 1),
+        [n, v, c] => (n, v, c),
+        _ => bail!(
+            "{}: expected shape [N, V] or [N, V, C], found {shape:?}",
+            path.display()
+        ),
+    };
+    let data: Vec<f32> = match npy.dtype() {
+        npyz::DType::Plain(t) if t.type_char() == npyz::TypeChar::Float && t.size_field() == 4 => {
+            npy.into_vec::<f32>()?
+        }
+        npyz::DType::Plain(t) if t.type_char() == npyz::TypeChar::Float && t.size_field() == 8 => {
+            npy.into_vec::<f64>()?
+                .into_iter()
+                .map(|x| x as f32)
+                .collect()
+        }
+        other => bail!(
+            "{}: expected float32 or float64 values, found {}",
+            path.display(),
+            other.descr()
+        ),
+    };
+    InMemorySignals::new(data, n, v, c).with_context(|| format!("{}", path.display()))
+}

@@ -1,0 +1,128 @@
+//! `mfm net summary` and `mfm net bench`: the PoissonNet presets, their
+//! parameter tables, and their training-step and inference times on a mesh.
+
+use crate::mesh_arg::load_mesh;
+use anyhow::{Context, Result, bail};
+use clap::Subcommand;
+use mfm_net::bench::{BenchOptions, bench_training_step};
+use mfm_net::runtime::TorchRuntime;
+use mfm_net::{PoissonNet, PoissonNetConfig};
+
+/// `mfm net ...`.
+#[derive(Subcommand)]
+pub enum NetCommand {
+    /// Print a preset's layer table (every variable, its shape and size) and
+    /// its parameter count.
+    Summary {
+        /// Preset: paper (W128 K5 nl3), medium (W64 K4) or small (W32 K3).
+        #[arg(long, default_value = "paper")]
+        preset: String,
+        /// Print the configuration and the parameter count as JSON instead.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Time flow-matching training steps (forward, backward, Adam) and
+    /// batch-1 inference on a mesh with synthetic inputs (noisy xyz in,
+    /// source xyz and t as conditioning). Prints the medians.
+    Bench {
+        /// Mesh file or builtin:NAME.
+        mesh: String,
+        /// Preset: paper, medium or small.
+        #[arg(long, default_value = "small")]
+        preset: String,
+        /// Batch size of the training steps.
+        #[arg(long, default_value_t = 4)]
+        batch: usize,
+        /// Timed training steps (the median is printed).
+        #[arg(long, default_value_t = 5)]
+        steps: usize,
+        /// Untimed warm-up steps first.
+        #[arg(long, default_value_t = 1)]
+        warmup: usize,
+        /// Timed batch-1 forward passes (0 skips them).
+        #[arg(long, default_value_t = 5)]
+        inference: usize,
+        /// libtorch threads (default: libtorch's choice, one per core).
+        #[arg(long)]
+        threads: Option<i32>,
+        /// Also print the time per network section.
+        #[arg(long)]
+        profile: bool,
+    },
+}
+
+/// Runs one `mfm net` subcommand.
+pub fn run(cmd: NetCommand) -> Result<()> {
+    match cmd {
+        NetCommand::Summary { preset, json } => summary(&preset, json),
+        NetCommand::Bench {
+            mesh,
+            preset,
+            batch,
+            steps,
+            warmup,
+            inference,
+            threads,
+            profile,
+        } => {
+            if batch == 0 || steps == 0 {
+                bail!("--batch and --steps must be at least 1");
+            }
+            if threads.is_some_and(|t| t < 1) {
+                bail!("--threads must be at least 1");
+            }
+            let config = preset_config(&preset)?;
+            let mesh = load_mesh(&mesh)?;
+            let runtime = TorchRuntime::query();
+            let opts = BenchOptions {
+                batch,
+                steps,
+                warmup,
+                inference_runs: inference,
+                threads,
+                device: runtime.preferred_device(),
+                profile,
+                ..BenchOptions::default()
+            };
+            println!(
+                "preset {preset} (W{} K{} nl{}) on {:?}",
+                config.width, config.blocks, config.vector_layers, opts.device
+            );
+            let report = bench_training_step(&mesh, &config, &opts)
+                .context("benchmarking the training step")?;
+            print!("{report}");
+            Ok(())
+        }
+    }
+}
+
+fn preset_config(name: &str) -> Result<PoissonNetConfig> {
+    PoissonNetConfig::preset(name).map_err(|e| anyhow::anyhow!("--preset: {e}"))
+}
+
+fn summary(preset: &str, json: bool) -> Result<()> {
+    let config = preset_config(preset)?;
+    let net = PoissonNet::new(&config, tch::Device::Cpu).context("building the network")?;
+    let summary = net.summary();
+    if json {
+        let value = serde_json::json!({
+            "preset": preset,
+            "config": config,
+            "parameters": summary.total,
+        });
+        println!("{}", serde_json::to_string_pretty(&value)?);
+    } else {
+        println!(
+            "preset {preset}: width {}, blocks {}, vector layers {}, in {}, out {}, conditioning {}, head {:?}",
+            config.width,
+            config.blocks,
+            config.vector_layers,
+            config.in_channels,
+            config.out_channels,
+            config.cond_channels,
+            config.head
+        );
+        println!("{summary}");
+    }
+    Ok(())
+}

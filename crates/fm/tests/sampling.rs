@@ -1,0 +1,279 @@
+//! Sampling: trained runs generate on other triangulations; the ODE
+//! integrators match closed forms on a network whose velocity is known.
+#![allow(clippy::unwrap_used)]
+
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use mfm_fm::InMemorySignals;
+use mfm_fm::checkpoint::{self, FlowSpec, WEIGHTS_FILE};
+use mfm_fm::config::{DeviceChoice, LrSchedule, OdeMethod, RunConfig};
+use mfm_fm::sample::{SampleOptions, Sampler};
+use mfm_fm::train::Trainer;
+use mfm_geometry::{TriMesh, procedural};
+use mfm_net::{HeadKind, PoissonNet, PoissonNetConfig};
+use mfm_noise::{NoiseKind, NoiseSampler};
+use tch::{Device, Tensor};
+
+fn signals(mesh: &TriMesh, count: usize, channels: usize) -> Arc<InMemorySignals> {
+    let v = mesh.num_vertices();
+    let mut data = Vec::new();
+    for i in 0..count {
+        for p in mesh.positions() {
+            for c in 0..channels {
+                data.push((p[c % 3] * (1.0 + i as f64) + 0.1 * c as f64) as f32);
+            }
+        }
+    }
+    Arc::new(InMemorySignals::new(data, count, v, channels).unwrap())
+}
+
+/// Trains a tiny model for a few steps on icosphere(1).
+fn tiny_run(dir: &std::path::Path, channels: usize, xyz: bool) -> TriMesh {
+    let mesh = procedural::icosphere(1);
+    let mut c = RunConfig::preset("cpu").unwrap();
+    c.model.width = Some(8);
+    c.model.blocks = Some(1);
+    c.model.vector_layers = Some(2);
+    c.model.condition_on_xyz = xyz;
+    c.train.steps = 4;
+    c.train.batch = 2;
+    c.train.lr_schedule = LrSchedule::constant();
+    c.train.checkpoint_every = 2;
+    c.train.threads = 1;
+    c.train.device = DeviceChoice::Cpu;
+    c.sample.steps = 3;
+    Trainer::new(dir, c, &mesh, signals(&mesh, 3, channels))
+        .unwrap()
+        .run(&AtomicBool::new(false), false)
+        .unwrap();
+    mesh
+}
+
+#[test]
+fn a_trained_run_samples_on_a_refined_mesh() {
+    let run = tempfile::tempdir().unwrap();
+    tiny_run(run.path(), 3, true);
+    let sampler = Sampler::load(run.path(), Some(Device::Cpu)).unwrap();
+    assert!(sampler.flow().condition_on_xyz);
+    let fine = procedural::icosphere(2); // a refinement of the training sphere
+    let opts = SampleOptions {
+        steps: 3,
+        method: OdeMethod::Midpoint,
+        batch: 2,
+    };
+    let s = sampler.sample(&fine, 5, 9, &opts).unwrap();
+    assert_eq!(
+        (s.samples, s.vertices, s.channels),
+        (5, fine.num_vertices(), 3)
+    );
+    assert_eq!(s.data.len(), 5 * fine.num_vertices() * 3);
+    assert!(s.data.iter().all(|x| x.is_finite()));
+    assert!(s.seconds_per_sample() > 0.0);
+    // samples differ from each other and depend on the seed, deterministically
+    assert_ne!(s.sample(0), s.sample(1));
+    let again = sampler.sample(&fine, 5, 9, &opts).unwrap();
+    assert_eq!(again.data, s.data);
+    let other = sampler.sample(&fine, 5, 10, &opts).unwrap();
+    assert_ne!(other.data, s.data);
+    // sample i does not depend on the batch it is generated in (up to the
+    // round-off of differently blocked matrix products)
+    let one_by_one = sampler
+        .sample(&fine, 5, 9, &SampleOptions { batch: 1, ..opts })
+        .unwrap();
+    let diff = one_by_one
+        .data
+        .iter()
+        .zip(&s.data)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(diff < 1e-4, "{diff}");
+    // starting noise: the run's kind on the *target* mesh
+    let target = sampler.prepare(&fine).unwrap();
+    let x0 = sampler.noise(&target, 2, 3, 9).unwrap();
+    let direct = NoiseSampler::new(&fine, sampler.flow().noise)
+        .unwrap()
+        .sample_range_f32(2, 3, 3, 9)
+        .unwrap();
+    let scale = sampler.flow().noise_scale as f32;
+    let expected: Vec<f32> = direct.data().iter().map(|x| x * scale).collect();
+    assert_eq!(Vec::<f32>::try_from(x0.flatten(0, -1)).unwrap(), expected);
+
+    // without the final model, the newest checkpoint is used: same samples
+    std::fs::remove_file(run.path().join(WEIGHTS_FILE)).unwrap();
+    let from_ckpt = Sampler::load(run.path(), Some(Device::Cpu)).unwrap();
+    assert_eq!(from_ckpt.sample(&fine, 5, 9, &opts).unwrap().data, s.data);
+    // ... unless it is damaged: then the previous one (another model)
+    let last = checkpoint::list_checkpoints(run.path())
+        .unwrap()
+        .pop()
+        .unwrap();
+    std::fs::write(last.dir.join(checkpoint::FLOW_FILE), "{}").unwrap();
+    let older = Sampler::load(run.path(), Some(Device::Cpu)).unwrap();
+    assert_ne!(older.sample(&fine, 5, 9, &opts).unwrap().data, s.data);
+}
+
+#[test]
+fn scalar_runs_sample_with_t_only_conditioning() {
+    let run = tempfile::tempdir().unwrap();
+    tiny_run(run.path(), 1, false);
+    let sampler = Sampler::load(run.path(), None).unwrap();
+    let opts = SampleOptions {
+        steps: 2,
+        method: OdeMethod::Euler,
+        batch: 4,
+    };
+    let fine = procedural::icosphere(3);
+    let s = sampler.sample(&fine, 3, 0, &opts).unwrap();
+    assert_eq!((s.samples, s.vertices, s.channels), (3, 642, 1));
+    assert!(s.data.iter().all(|x| x.is_finite()));
+}
+
+/// A network whose velocity is `v(x, t) = alpha x + beta` per vertex: no
+/// blocks, `proj_in` picks `x` into the first feature, the linear head reads
+/// it back times `alpha` and adds `beta`.
+fn affine_velocity_net(alpha: f64, beta: f64) -> PoissonNet {
+    let cfg = PoissonNetConfig {
+        width: 4,
+        blocks: 0,
+        vector_layers: 1,
+        in_channels: 1,
+        out_channels: 1,
+        cond_channels: 1,
+        modulation: false,
+        head: HeadKind::Linear,
+    };
+    let net = PoissonNet::new(&cfg, Device::Cpu).unwrap();
+    tch::no_grad(|| {
+        for (name, mut t) in net.var_store().variables() {
+            let _ = t.zero_();
+            match name.as_str() {
+                "proj_in.weight" => {
+                    let _ = t.get(0).get(0).fill_(1.0);
+                }
+                "head.linear.weight" => {
+                    let _ = t.get(0).get(0).fill_(alpha);
+                }
+                "head.linear.bias" => {
+                    let _ = t.fill_(beta);
+                }
+                _ => {}
+            }
+        }
+    });
+    net
+}
+
+fn flow(noise: NoiseKind, offset: f64) -> FlowSpec {
+    FlowSpec {
+        channels: 1,
+        noise,
+        noise_scale: 3.0,
+        condition_on_xyz: false,
+        velocity_offset: vec![offset],
+    }
+}
+
+fn values(t: &Tensor) -> Vec<f64> {
+    Vec::<f32>::try_from(t.flatten(0, -1))
+        .unwrap()
+        .into_iter()
+        .map(f64::from)
+        .collect()
+}
+
+#[test]
+fn zero_velocity_returns_the_noise() {
+    let mesh = procedural::icosphere(2);
+    let sampler = Sampler::new(affine_velocity_net(0.0, 0.0), flow(NoiseKind::White, 0.0)).unwrap();
+    let target = sampler.prepare(&mesh).unwrap();
+    let x0 = sampler.noise(&target, 0, 3, 4).unwrap();
+    for method in [OdeMethod::Euler, OdeMethod::Midpoint] {
+        let opts = SampleOptions {
+            steps: 5,
+            method,
+            batch: 2,
+        };
+        let s = sampler.sample_on(&target, 0, 3, 4, &opts).unwrap();
+        assert_eq!(s.data, Vec::<f32>::try_from(x0.flatten(0, -1)).unwrap());
+    }
+}
+
+#[test]
+fn euler_and_midpoint_match_their_recurrences_and_converge_at_their_orders() {
+    // dx/dt = a x + b (b = head bias + velocity offset), x(1) = (x0 + b/a) e^a - b/a
+    let (a, bias, offset) = (0.8, 0.25, 0.15);
+    let b = bias + offset;
+    let mesh = procedural::icosphere(1);
+    let sampler = Sampler::new(
+        affine_velocity_net(a, bias),
+        flow(NoiseKind::Matern { tau: 10.0 }, offset),
+    )
+    .unwrap();
+    let target = sampler.prepare(&mesh).unwrap();
+    let x0 = sampler.noise(&target, 0, 2, 1).unwrap();
+    let start = values(&x0);
+    let exact: Vec<f64> = start
+        .iter()
+        .map(|x| (x + b / a) * a.exp() - b / a)
+        .collect();
+    let max_err = |got: &[f64], want: &[f64]| {
+        got.iter()
+            .zip(want)
+            .map(|(g, w)| (g - w).abs())
+            .fold(0.0, f64::max)
+    };
+    let mut errors = Vec::new();
+    for method in [OdeMethod::Euler, OdeMethod::Midpoint] {
+        let mut per_steps = Vec::new();
+        for steps in [8usize, 16] {
+            let h = 1.0 / steps as f64;
+            // one step of each method on the affine field, in f64
+            let (gain, shift) = match method {
+                OdeMethod::Euler => (1.0 + a * h, b * h),
+                OdeMethod::Midpoint => (
+                    1.0 + a * h + a * a * h * h / 2.0,
+                    b * h * (1.0 + a * h / 2.0),
+                ),
+            };
+            let mut want = start.clone();
+            for _ in 0..steps {
+                want.iter_mut().for_each(|x| *x = gain * *x + shift);
+            }
+            let opts = SampleOptions {
+                steps,
+                method,
+                batch: 2,
+            };
+            let got = values(&sampler.integrate(&target, &x0, &opts).unwrap());
+            assert!(
+                max_err(&got, &want) < 1e-5,
+                "{method:?} {steps}: {}",
+                max_err(&got, &want)
+            );
+            per_steps.push(max_err(&got, &exact));
+        }
+        errors.push(per_steps);
+    }
+    let (euler, midpoint) = (&errors[0], &errors[1]);
+    eprintln!("errors vs exact: euler {euler:?}, midpoint {midpoint:?}");
+    // first order: halving h halves the error; second order: quarters it
+    assert!((euler[0] / euler[1] - 2.0).abs() < 0.3, "{euler:?}");
+    assert!(
+        (midpoint[0] / midpoint[1] - 4.0).abs() < 0.6,
+        "{midpoint:?}"
+    );
+    assert!(midpoint[1] < euler[1] / 10.0);
+}
+
+#[test]
+fn mismatched_networks_are_rejected() {
+    let net = affine_velocity_net(1.0, 0.0);
+    let mut f = flow(NoiseKind::White, 0.0);
+    f.channels = 3;
+    f.velocity_offset = vec![0.0; 3];
+    assert!(Sampler::new(net, f).is_err());
+    let mut f = flow(NoiseKind::White, 0.0);
+    f.condition_on_xyz = true;
+    assert!(Sampler::new(affine_velocity_net(1.0, 0.0), f).is_err());
+}
