@@ -621,10 +621,8 @@ impl RunConfig {
     ///   from step 40k, gradient clipping at 1.
     /// - `cpu`: a CPU-sized run of the same method: `W = 16, K = 2, nl = 2`,
     ///   batch 4, 300 steps, lr `2e-3` then `5e-4` from step 200, a
-    ///   checkpoint every 100 steps, 16 midpoint steps for sampling, noise
-    ///   scaled to unit RMS on the training mesh (`scale = "unit"`: with
-    ///   signals of amplitude ~1, unscaled `matern:100` noise (RMS ~0.03)
-    ///   makes the short run learn little). About a
+    ///   checkpoint every 100 steps, 16 midpoint steps for sampling, the
+    ///   paper's unscaled `matern:100` noise. About a
     ///   minute of training on two cores at ~2k vertices.
     ///
     /// # Errors
@@ -654,10 +652,6 @@ impl RunConfig {
                         checkpoint_every: 100,
                         log_every: 10,
                         ..base.train
-                    },
-                    noise: NoiseConfig {
-                        scale: NoiseScale::Unit,
-                        ..base.noise
                     },
                     sample: SampleConfig {
                         steps: 16,
