@@ -27,7 +27,7 @@ pub(crate) fn mfm_binary(env: &PyEnv) -> Result<PathBuf> {
 }
 
 /// Runs `mfm` with the terminal attached (progress bars stay live).
-fn mfm_live(exe: &Path, args: &[&str]) -> Result<()> {
+pub(crate) fn mfm_live(exe: &Path, args: &[&str]) -> Result<()> {
     crate::run(Command::new(exe).args(args))
 }
 

@@ -17,7 +17,6 @@ use anyhow::{Context, Result};
 use serde_json::Value;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::time::Instant;
 
 /// Arguments of `reproduce-figures gmm`.
@@ -49,7 +48,7 @@ pub struct GmmArgs {
 
 fn mfm_live(exe: &Path, args: &[&str]) -> Result<()> {
     println!("$ mfm {}", args.join(" "));
-    crate::run(Command::new(exe).args(args))
+    crate::demo::mfm_live(exe, args)
 }
 
 /// Runs the experiment.

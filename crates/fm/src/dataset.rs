@@ -414,20 +414,7 @@ impl SignalSource for Dataset {
     /// one seek and one read per run of consecutive indices).
     fn read_into(&self, indices: &[usize], out: &mut [f32]) -> Result<()> {
         let n = self.row_values();
-        if out.len() != indices.len() * n {
-            return Err(FmError::SizeMismatch {
-                what: "output buffer".into(),
-                expected: indices.len() * n,
-                found: out.len(),
-            });
-        }
-        if let Some(&bad) = indices.iter().find(|&&i| i >= self.len) {
-            return Err(FmError::SizeMismatch {
-                what: "signal index".into(),
-                expected: self.len,
-                found: bad,
-            });
-        }
+        crate::signals::check_read_request(self.len, n, indices, out.len())?;
         if indices.is_empty() || n == 0 {
             return Ok(());
         }

@@ -28,6 +28,35 @@ pub trait SignalSource: Send + Sync {
     fn read_into(&self, indices: &[usize], out: &mut [f32]) -> Result<()>;
 }
 
+/// Checks a [`SignalSource::read_into`] request against a source of `len`
+/// signals of `row_values` values each: `out_len` must be
+/// `indices.len() * row_values` and every index below `len`.
+///
+/// # Errors
+/// [`FmError::SizeMismatch`] naming the output buffer or the first bad index.
+pub(crate) fn check_read_request(
+    len: usize,
+    row_values: usize,
+    indices: &[usize],
+    out_len: usize,
+) -> Result<()> {
+    if out_len != indices.len() * row_values {
+        return Err(FmError::SizeMismatch {
+            what: "output buffer".into(),
+            expected: indices.len() * row_values,
+            found: out_len,
+        });
+    }
+    if let Some(&bad) = indices.iter().find(|&&i| i >= len) {
+        return Err(FmError::SizeMismatch {
+            what: "signal index".into(),
+            expected: len,
+            found: bad,
+        });
+    }
+    Ok(())
+}
+
 /// Signals held in memory: row-major `[N, V, C]` `f32` values.
 ///
 /// # Example
@@ -98,21 +127,8 @@ impl SignalSource for InMemorySignals {
 
     fn read_into(&self, indices: &[usize], out: &mut [f32]) -> Result<()> {
         let n = self.vertices * self.channels;
-        if out.len() != indices.len() * n {
-            return Err(FmError::SizeMismatch {
-                what: "output buffer".into(),
-                expected: indices.len() * n,
-                found: out.len(),
-            });
-        }
+        check_read_request(self.len, n, indices, out.len())?;
         for (chunk, &i) in out.chunks_mut(n.max(1)).zip(indices) {
-            if i >= self.len {
-                return Err(FmError::SizeMismatch {
-                    what: "signal index".into(),
-                    expected: self.len,
-                    found: i,
-                });
-            }
             chunk.copy_from_slice(self.signal(i));
         }
         Ok(())
