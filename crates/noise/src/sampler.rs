@@ -12,10 +12,15 @@
 //! Sample `i`, channel `c` of seed `s` is drawn from its own ChaCha8 stream
 //! (key from `s`, stream id `i`, word offset `c * 2^40`), with standard
 //! normals from `rand_distr::StandardNormal` (ziggurat), one per vertex in
-//! vertex order (one per eigenpair for the explicit kind). Consequences:
+//! vertex order (one per eigenpair for the explicit kind). The `f32` methods
+//! ([`NoiseSampler::sample_f32`]) read the same streams through a 32-bit
+//! ziggurat instead (one keystream word per normal), so their values are
+//! another draw of the same law, not the `f64` values rounded (except for
+//! the explicit kind). Consequences, for both precisions:
 //! - the output is bit-identical whatever the rayon thread count and however
 //!   the batch is cut into blocks (the solver's block solves are column-wise
-//!   bit-identical to single solves);
+//!   bit-identical to single solves); blocks are as wide as memory allows
+//!   (up to 1 GiB of right-hand sides), so a batch is usually one block;
 //! - [`NoiseSampler::sample_range`] continues a sequence:
 //!   `sample_range(first, n, ..)` returns samples `first .. first + n` of the
 //!   same seed, so large sets can be drawn in pieces;
@@ -33,7 +38,11 @@ use rayon::prelude::*;
 
 use crate::error::{NoiseError, Result};
 use crate::kind::NoiseKind;
-use crate::rng::{MAX_CHANNELS, fill_normals, stream};
+use crate::rng::{MAX_CHANNELS, fill_normals, fill_normals_f32, stream};
+
+/// Largest block of right-hand sides [`NoiseSampler`] draws and solves at
+/// once, in bytes (the solver's panels take about as much again).
+const BLOCK_BYTES: usize = 1 << 30;
 
 /// A batch of noise signals: `samples x vertices x channels` values stored
 /// row-major (`data[(s * vertices + v) * channels + c]`), so each sample is a
@@ -391,23 +400,27 @@ impl NoiseSampler {
         channels: usize,
         seed: u64,
     ) -> Result<NoiseBatch> {
+        let per_block = self.block_samples(channels, std::mem::size_of::<f64>());
+        self.sample_range_blocked(first, count, channels, seed, per_block)
+    }
+
+    /// [`NoiseSampler::sample_range`] with blocks of `per_block` samples.
+    fn sample_range_blocked(
+        &self,
+        first: usize,
+        count: usize,
+        channels: usize,
+        seed: u64,
+        per_block: usize,
+    ) -> Result<NoiseBatch> {
         self.check_channels(channels)?;
         let v = self.num_vertices();
         let mut data = vec![0.0; checked_len(count, v, channels)?];
         if data.is_empty() {
             return NoiseBatch::from_vec(data, count, v, channels);
         }
-        let per_block = self.block_samples(channels);
-        // one channel: [N, V, 1] is the column-major block itself, so draw,
-        // solve and scale in the output; otherwise go through a scratch block
-        let mut scratch = vec![
-            0.0;
-            if channels > 1 {
-                per_block * v * channels
-            } else {
-                0
-            }
-        ];
+        let per_block = per_block.clamp(1, count);
+        let mut scratch = scratch_block(per_block, v, channels);
         for (b, out) in data.chunks_mut(per_block * v * channels).enumerate() {
             let start = first + b * per_block;
             let cols = out.len() / v;
@@ -415,7 +428,9 @@ impl NoiseSampler {
                 self.draw_into(out, start, 1, seed);
                 self.solve_block(out, cols)?;
                 let amp = self.amplitude;
-                out.par_iter_mut().for_each(|x| *x *= amp);
+                if amp != 1.0 {
+                    out.par_iter_mut().for_each(|x| *x *= amp);
+                }
             } else {
                 let block = &mut scratch[..out.len()];
                 self.draw_into(block, start, channels, seed);
@@ -426,10 +441,17 @@ impl NoiseSampler {
         NoiseBatch::from_vec(data, count, v, channels)
     }
 
-    /// [`NoiseSampler::sample`] in `f32`. The random draws are the `f64` ones;
-    /// Matérn solves run with the solver's `f32` factor (relative accuracy
-    /// about `cond(L + tau M) * 6e-8`, typically `< 1e-5`), the other kinds
-    /// are computed in `f64` and rounded.
+    /// [`NoiseSampler::sample`] in `f32`.
+    ///
+    /// The normals are drawn in `f32` (a 32-bit ziggurat on the same
+    /// per-(seed, sample, channel) streams, see the [module docs](self)), so
+    /// the values follow the same law as [`NoiseSampler::sample`]'s but are
+    /// not its rounding; they have the same determinism guarantees. Matérn
+    /// kinds scale the normals by `amplitude * M^1/2` in `f32` and solve with
+    /// the solver's `f32` factor (relative accuracy about
+    /// `cond(L + tau M) * 6e-8`, typically `< 1e-5`); naive and white noise
+    /// are computed in `f32`; the explicit kind is computed in `f64` and
+    /// rounded (it is [`NoiseSampler::sample`] rounded).
     ///
     /// # Errors
     /// See [`NoiseSampler::sample_range`].
@@ -442,7 +464,8 @@ impl NoiseSampler {
         self.sample_range_f32(0, samples, channels, seed)
     }
 
-    /// [`NoiseSampler::sample_range`] in `f32` (see [`NoiseSampler::sample_f32`]).
+    /// [`NoiseSampler::sample_range`] in `f32` (see [`NoiseSampler::sample_f32`]):
+    /// samples `first .. first + count` of the `f32` sequence of `seed`.
     ///
     /// # Errors
     /// See [`NoiseSampler::sample_range`].
@@ -453,8 +476,37 @@ impl NoiseSampler {
         channels: usize,
         seed: u64,
     ) -> Result<NoiseBatch<f32>> {
-        let Engine::Poisson { poisson, .. } = &self.engine else {
-            return Ok(self.sample_range(first, count, channels, seed)?.to_f32());
+        let per_block = self.block_samples(channels, std::mem::size_of::<f32>());
+        self.sample_range_f32_blocked(first, count, channels, seed, per_block)
+    }
+
+    /// [`NoiseSampler::sample_range_f32`] with blocks of `per_block` samples.
+    fn sample_range_f32_blocked(
+        &self,
+        first: usize,
+        count: usize,
+        channels: usize,
+        seed: u64,
+        per_block: usize,
+    ) -> Result<NoiseBatch<f32>> {
+        // per-vertex factor applied to the normals (none for naive noise)
+        let scale: Option<Vec<f32>> = match &self.engine {
+            Engine::Explicit { .. } => {
+                // computed in f64: blocks within the f64 budget
+                let per_block = per_block.min(self.block_samples(channels, 8));
+                return Ok(self
+                    .sample_range_blocked(first, count, channels, seed, per_block)?
+                    .to_f32());
+            }
+            Engine::Diagonal(scale) => scale
+                .as_ref()
+                .map(|s| s.iter().map(|&x| x as f32).collect()),
+            Engine::Poisson { sqrt_mass, .. } => Some(
+                sqrt_mass
+                    .iter()
+                    .map(|&x| (x * self.amplitude) as f32)
+                    .collect(),
+            ),
         };
         self.check_channels(channels)?;
         let v = self.num_vertices();
@@ -462,37 +514,29 @@ impl NoiseSampler {
         if data.is_empty() {
             return NoiseBatch::from_vec(data, count, v, channels);
         }
-        let per_block = self.block_samples(channels);
-        let mut scratch = vec![0.0; per_block * v * channels];
-        let mut scratch32 = vec![
-            0.0f32;
-            if channels > 1 {
-                per_block * v * channels
-            } else {
-                0
-            }
-        ];
-        let amp = self.amplitude as f32;
+        let per_block = per_block.clamp(1, count);
+        let mut scratch = scratch_block(per_block, v, channels);
         for (b, out) in data.chunks_mut(per_block * v * channels).enumerate() {
             let start = first + b * per_block;
             let cols = out.len() / v;
-            let block = &mut scratch[..out.len()];
-            self.draw_into(block, start, channels, seed);
-            let block32 = if channels == 1 {
+            let block = if channels == 1 {
                 &mut *out
             } else {
-                &mut scratch32[..block.len()]
+                &mut scratch[..out.len()]
             };
-            block32
-                .par_iter_mut()
-                .zip(block.par_iter())
-                .for_each(|(y, x)| *y = *x as f32);
-            poisson
-                .solve_many_f32_in_place(MatMut::from_column_major_slice_mut(block32, v, cols))?;
-            if channels == 1 {
-                out.par_iter_mut().for_each(|x| *x *= amp);
-            } else {
-                scatter(&scratch32[..out.len()], out, v, channels, amp);
+            block.par_chunks_mut(v).enumerate().for_each(|(j, col)| {
+                let sample = (start + j / channels) as u64;
+                fill_normals_f32(seed, sample, (j % channels) as u64, col);
+                if let Some(s) = &scale {
+                    col.iter_mut().zip(s).for_each(|(x, s)| *x *= s);
+                }
+            });
+            if let Engine::Poisson { poisson, .. } = &self.engine {
+                poisson
+                    .solve_many_f32_in_place(MatMut::from_column_major_slice_mut(block, v, cols))?;
+            }
+            if channels > 1 {
+                scatter(&scratch[..out.len()], out, v, channels, 1.0);
             }
         }
         NoiseBatch::from_vec(data, count, v, channels)
@@ -509,12 +553,15 @@ impl NoiseSampler {
         Ok(())
     }
 
-    /// Samples per block: about 128 right-hand sides, fewer on large meshes
-    /// so that a block stays under ~32 MiB.
-    fn block_samples(&self, channels: usize) -> usize {
+    /// Samples per block: as many as fit [`BLOCK_BYTES`] of right-hand
+    /// sides (values of `bytes` bytes), so that a whole batch is usually
+    /// solved in one pass over the factor (the solve streams the factor once
+    /// per block and thread, and the output is as large anyway); at least 8
+    /// right-hand sides. Callers clamp it to the batch.
+    fn block_samples(&self, channels: usize, bytes: usize) -> usize {
         let v = self.num_vertices().max(1);
-        let cols = (4_194_304 / v).clamp(16, 128);
-        (cols / channels).max(1)
+        let cols = (BLOCK_BYTES / (v * bytes)).max(8);
+        (cols / channels.max(1)).max(1)
     }
 
     /// Solves the Matérn system in place for a column-major `V x cols` block
@@ -588,6 +635,18 @@ pub(crate) fn zero_mode_tolerance(values: &[f64]) -> f64 {
     1e-8 * values.iter().copied().fold(0.0, f64::max)
 }
 
+/// Column-major scratch block for `per_block` samples of `channels`
+/// channels. One channel needs none: `[N, V, 1]` is the column-major block
+/// itself, so draws, solves and scaling happen in the output.
+fn scratch_block<T: Clone + Default>(per_block: usize, v: usize, channels: usize) -> Vec<T> {
+    let len = if channels > 1 {
+        per_block * v * channels
+    } else {
+        0
+    };
+    vec![T::default(); len]
+}
+
 /// Writes the column-major block (column `s * channels + c`) into the
 /// row-major `[n, V, C]` output, multiplied by `amp`.
 fn scatter<T: Copy + Send + Sync + std::ops::Mul<Output = T>>(
@@ -610,4 +669,58 @@ fn scatter<T: Copy + Send + Sync + std::ops::Mul<Output = T>>(
                 }
             }
         });
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use mfm_geometry::procedural;
+
+    /// The block size changes neither bit of a batch, in `f64` nor `f32`,
+    /// for one channel (drawn and solved in the output) or several (through
+    /// the scratch block), nor for a range that starts mid-block.
+    #[test]
+    fn batches_do_not_depend_on_the_block_size() {
+        let mesh = procedural::icosphere(2);
+        for kind in [
+            NoiseKind::MaternNormalized { c: 0.05 },
+            NoiseKind::White,
+            NoiseKind::Explicit { k: 12, tau: 1.0 },
+        ] {
+            let s = NoiseSampler::new(&mesh, kind).unwrap();
+            for channels in [1, 3] {
+                let whole = s.sample_range_blocked(3, 23, channels, 5, 23).unwrap();
+                let whole32 = s.sample_range_f32_blocked(3, 23, channels, 5, 23).unwrap();
+                for per_block in [1, 4, 9, 1000] {
+                    let b = s
+                        .sample_range_blocked(3, 23, channels, 5, per_block)
+                        .unwrap();
+                    assert_eq!(
+                        b, whole,
+                        "{kind}, {channels} channels, blocks of {per_block}"
+                    );
+                    let b = s
+                        .sample_range_f32_blocked(3, 23, channels, 5, per_block)
+                        .unwrap();
+                    assert_eq!(
+                        b, whole32,
+                        "{kind} f32, {channels} channels, blocks of {per_block}"
+                    );
+                }
+                // and the public entry points agree with them
+                assert_eq!(s.sample_range(3, 23, channels, 5).unwrap(), whole);
+                assert_eq!(s.sample_range_f32(3, 23, channels, 5).unwrap(), whole32);
+            }
+        }
+    }
+
+    #[test]
+    fn blocks_hold_the_whole_batch_within_the_budget() {
+        let s = NoiseSampler::new(&procedural::icosphere(1), NoiseKind::White).unwrap();
+        // 42 vertices: the budget allows millions of samples per block
+        assert!(s.block_samples(1, 8) > 1_000_000);
+        assert_eq!(s.block_samples(3, 8), s.block_samples(1, 8) / 3);
+        assert_eq!(s.block_samples(1, 4), 2 * s.block_samples(1, 8));
+    }
 }

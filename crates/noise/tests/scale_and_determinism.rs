@@ -64,8 +64,9 @@ fn bits(b: &NoiseBatch) -> Vec<u64> {
 }
 
 /// 1-, 2- and 16-thread pools give the same bits, for batches large enough
-/// to be cut into several sample blocks and several solver chunks (of
-/// widths that depend on the thread count); a range
+/// to be cut into several solver chunks (of widths that depend on the
+/// thread count; the sampler's own block cutting is tested in its unit
+/// tests); a range
 /// drawn on its own equals the same range of a full batch; one channel of a
 /// 3-channel batch equals a 1-channel draw.
 #[test]
@@ -113,21 +114,127 @@ fn samples_are_bit_identical_across_thread_counts_and_batch_cuts() {
     }
 }
 
-/// f32 sampling uses the same draws: it matches the f64 samples to f32
-/// accuracy (the Matérn solve runs with the f32 factor).
+/// `y = L x` from the CSC arrays (both triangles are stored).
+fn matvec(l: &faer::sparse::SparseColMat<usize, f64>, x: &[f64]) -> Vec<f64> {
+    let mut y = vec![0.0; x.len()];
+    let (cp, ri, val) = (l.symbolic().col_ptr(), l.symbolic().row_idx(), l.val());
+    for (j, xj) in x.iter().enumerate() {
+        for p in cp[j]..cp[j + 1] {
+            y[ri[p]] += val[p] * xj;
+        }
+    }
+    y
+}
+
+/// f32 sampling draws its own `f32` normals `n` (naive `f32` noise is
+/// exactly them): white noise is `M^-1/2 n` rounded, Matérn noise solves
+/// `(L + tau M) f = M^1/2 n` to f32 accuracy (checked in f64 against the
+/// operators), normalized Matérn carries `sqrt(Gamma)`, and the explicit
+/// kind is its f64 sample rounded.
 #[test]
-fn f32_samples_match_f64() {
+fn f32_samples_solve_their_equations_with_f32_normals() {
     let mesh = common::blob(3);
-    for kind in [NoiseKind::Matern { tau: 10.0 }, NoiseKind::White] {
-        let s = NoiseSampler::new(&mesh, kind).unwrap();
-        let a = s.sample(40, 2, 3).unwrap();
-        let b = s.sample_f32(40, 2, 3).unwrap();
-        let b64: Vec<f64> = b.data().iter().map(|&x| f64::from(x)).collect();
-        let d = common::max_rel_diff(a.data(), &b64);
-        assert!(d < 1e-5, "{kind}: f32 vs f64 relative difference {d:e}");
+    let ops = mfm_geometry::operators::Operators::new(&mesh).unwrap();
+    let (l, m) = (&ops.laplacian, &ops.mass);
+    let (ns, ch, seed) = (40, 2, 3);
+    let naive = NoiseSampler::new(&mesh, NoiseKind::Naive)
+        .unwrap()
+        .sample_f32(ns, ch, seed)
+        .unwrap();
+    let moments = naive.data().iter().fold((0.0, 0.0), |(a, b), &x| {
+        (a + f64::from(x), b + f64::from(x) * f64::from(x))
+    });
+    let count = naive.data().len() as f64;
+    assert!((moments.0 / count).abs() < 5.0 / count.sqrt());
+    assert!((moments.1 / count - 1.0).abs() < 8.0 * (2.0 / count).sqrt());
+    let white = NoiseSampler::new(&mesh, NoiseKind::White)
+        .unwrap()
+        .sample_f32(ns, ch, seed)
+        .unwrap();
+    for (i, (&w, &n)) in white.data().iter().zip(naive.data()).enumerate() {
+        let v = (i / ch) % mesh.num_vertices();
+        assert_eq!(w, n * (1.0 / m[v].sqrt()) as f32);
+    }
+    let tau = 10.0;
+    let matern = NoiseSampler::new(&mesh, NoiseKind::Matern { tau }).unwrap();
+    let normalized = NoiseSampler::new(&mesh, NoiseKind::MaternNormalized { c: 0.01 }).unwrap();
+    let (a, b) = (
+        matern.sample_f32(ns, ch, seed).unwrap(),
+        normalized.sample_f32(ns, ch, seed).unwrap(),
+    );
+    let (gamma, tau_n) = (normalized.gamma(), normalized.tau().unwrap());
+    for s in 0..ns {
+        for c in 0..ch {
+            let n: Vec<f64> = naive.signal(s, c).iter().map(|&x| f64::from(x)).collect();
+            let rhs: Vec<f64> = n.iter().zip(m).map(|(n, m)| m.sqrt() * n).collect();
+            let rn = rhs.iter().map(|x| x * x).sum::<f64>().sqrt();
+            for (sample, t, amp) in [(&a, tau, 1.0), (&b, tau_n, gamma.sqrt())] {
+                let f: Vec<f64> = sample
+                    .signal(s, c)
+                    .iter()
+                    .map(|&x| f64::from(x) / amp)
+                    .collect();
+                let lf = matvec(l, &f);
+                let r = (0..f.len())
+                    .map(|v| (lf[v] + t * m[v] * f[v] - rhs[v]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                assert!(r < 1e-5 * rn, "tau {t}: relative residual {}", r / rn);
+            }
+        }
+    }
+    let explicit = NoiseSampler::new(&mesh, NoiseKind::Explicit { k: 10, tau: 2.0 }).unwrap();
+    assert_eq!(
+        explicit.sample_f32(5, 2, 8).unwrap(),
+        explicit.sample(5, 2, 8).unwrap().to_f32()
+    );
+    assert_eq!(
+        (a.samples(), a.vertices(), a.channels()),
+        (ns, mesh.num_vertices(), ch)
+    );
+}
+
+fn bits32(b: &NoiseBatch<f32>) -> Vec<u32> {
+    b.data().iter().map(|x| x.to_bits()).collect()
+}
+
+/// The f32 path has the f64 path's guarantees: 1, 2 and 16 threads give the
+/// same bits, a range equals the same slice of a bigger batch, and a channel
+/// does not depend on how many are drawn.
+#[test]
+fn f32_samples_are_bit_identical_across_thread_counts_and_batch_cuts() {
+    let mesh = common::blob(3);
+    let (n, c, seed) = (150, 3, 0xbeef);
+    for kind in [
+        NoiseKind::Matern { tau: 100.0 },
+        NoiseKind::MaternNormalized { c: 0.01 },
+        NoiseKind::White,
+        NoiseKind::Naive,
+    ] {
+        let sampler = NoiseSampler::new(&mesh, kind).unwrap();
+        let one = in_pool(1, || sampler.sample_f32(n, c, seed).unwrap());
+        let two = in_pool(2, || sampler.sample_f32(n, c, seed).unwrap());
+        assert_eq!(bits32(&one), bits32(&two), "{kind}: 1 vs 2 threads");
+        let many = in_pool(16, || sampler.sample_f32(n, c, seed).unwrap());
+        assert_eq!(bits32(&one), bits32(&many), "{kind}: 1 vs 16 threads");
+        let v = mesh.num_vertices();
+        let part = in_pool(2, || sampler.sample_range_f32(61, 47, c, seed).unwrap());
         assert_eq!(
-            (b.samples(), b.vertices(), b.channels()),
-            (40, mesh.num_vertices(), 2)
+            part.data(),
+            &one.data()[61 * v * c..108 * v * c],
+            "{kind}: range"
+        );
+        let single = sampler.sample_f32(5, 1, seed).unwrap();
+        for s in 0..5 {
+            assert_eq!(
+                single.signal(s, 0),
+                one.signal(s, 0),
+                "{kind}: channel 0 alone"
+            );
+        }
+        assert_ne!(
+            sampler.sample_f32(1, 1, seed + 1).unwrap().data(),
+            single.sample(0)
         );
     }
 }

@@ -16,7 +16,10 @@
 //!    per rayon thread when there are enough columns) that are solved
 //!    concurrently, each chunk as a row-major panel: the factor is streamed
 //!    once per chunk and every update is a vector operation over the chunk's
-//!    columns.
+//!    columns, with register tiles of several rows and lanes. The panels
+//!    (`n x 32` values at most) are kept by the factor, one per rayon thread
+//!    at most, so repeated solves on a large factor do not pay for fresh
+//!    memory each time ([`CholeskyFactor::release_workspace`] frees them).
 //!
 //! ## Conventions
 //! - Inputs are `faer` compressed-column matrices with `usize` indices. The
@@ -98,7 +101,9 @@ mod sealed {
 ///
 /// Factorization always happens in `f64`; a factor can then be converted to
 /// `f32` ([`CholeskyFactor::to_f32`]) for solves that move half the memory.
-pub trait Real: faer::traits::RealField + Copy + Send + Sync + Into<f64> + sealed::Sealed {
+pub trait Real:
+    faer::traits::RealField + Copy + Send + Sync + Into<f64> + sealed::Sealed + 'static
+{
     /// Rounds an `f64` to this type.
     fn from_f64(x: f64) -> Self;
     /// `self * a + b` with a single rounding.
@@ -106,6 +111,7 @@ pub trait Real: faer::traits::RealField + Copy + Send + Sync + Into<f64> + seale
 }
 
 impl Real for f64 {
+    #[inline(always)]
     fn from_f64(x: f64) -> Self {
         x
     }
@@ -116,6 +122,7 @@ impl Real for f64 {
 }
 
 impl Real for f32 {
+    #[inline(always)]
     fn from_f64(x: f64) -> Self {
         x as f32
     }
@@ -344,6 +351,27 @@ impl SymbolicAnalysis {
 pub struct CholeskyFactor<T: Real = f64> {
     symbolic: Arc<SymbolicAnalysis>,
     values: Vec<T>,
+    pool: PanelPool,
+}
+
+/// Solve panels kept between solves, so that repeated solves on a large
+/// factor do not pay for fresh memory each time. Clones start empty.
+#[derive(Default)]
+struct PanelPool {
+    panels: std::sync::Mutex<Vec<Box<dyn std::any::Any + Send>>>,
+}
+
+impl Clone for PanelPool {
+    fn clone(&self) -> Self {
+        Self::default()
+    }
+}
+
+impl std::fmt::Debug for PanelPool {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = self.panels.lock().map(|p| p.len()).unwrap_or(0);
+        write!(f, "PanelPool({n} panels)")
+    }
 }
 
 impl CholeskyFactor<f64> {
@@ -475,7 +503,11 @@ impl CholeskyFactor<f64> {
                 }
             }
         }
-        Ok(Self { symbolic, values })
+        Ok(Self {
+            symbolic,
+            values,
+            pool: PanelPool::default(),
+        })
     }
 
     /// Copy of the factor rounded to `f32`.
@@ -488,6 +520,7 @@ impl CholeskyFactor<f64> {
         CholeskyFactor {
             symbolic: Arc::clone(&self.symbolic),
             values: self.values.iter().map(|&v| v as f32).collect(),
+            pool: PanelPool::default(),
         }
     }
 }
@@ -502,6 +535,12 @@ impl<T: Real> CholeskyFactor<T> {
     /// matrices with the same pattern).
     pub fn symbolic(&self) -> &Arc<SymbolicAnalysis> {
         &self.symbolic
+    }
+
+    /// The supernodal values (faer's layout, see `kernel`).
+    #[cfg(test)]
+    pub(crate) fn values(&self) -> &[T] {
+        &self.values
     }
 
     /// Solves `A x = b` for one right-hand side and returns `x`.
@@ -524,7 +563,10 @@ impl<T: Real> CholeskyFactor<T> {
 
     /// Solves `A X = B` in place: `rhs` holds `B` (`n x k`) on entry and `X` on
     /// return. Chunks of at most [`SOLVE_CHUNK`] columns run concurrently on
-    /// the rayon pool; call it from several threads at once freely.
+    /// the rayon pool; call it from several threads at once freely. The
+    /// panels the chunks are solved in (`n x 8`, `16` or `32` values each)
+    /// are kept for the next solve, at most one per rayon thread
+    /// ([`CholeskyFactor::release_workspace`]).
     ///
     /// Errors: [`SolverError::SizeMismatch`], [`SolverError::NonFinite`]
     /// (`rhs` is left untouched on error).
@@ -575,40 +617,87 @@ impl<T: Real> CholeskyFactor<T> {
         }
     }
 
+    /// A panel of `n` rows of width `K` from the pool, or a new one. Its
+    /// values are left over from an earlier solve (finite: inputs are
+    /// checked) or zero.
+    fn take_panel<const K: usize>(&self) -> Vec<kernel::Row<T, K>> {
+        let n = self.dim();
+        let mut pool = self.pool.panels.lock().unwrap_or_else(|e| e.into_inner());
+        while let Some(i) = pool.iter().position(|p| p.is::<Vec<kernel::Row<T, K>>>()) {
+            if let Ok(p) = pool.swap_remove(i).downcast::<Vec<kernel::Row<T, K>>>() {
+                if p.len() == n {
+                    return *p;
+                }
+            }
+        }
+        drop(pool);
+        vec![kernel::Row([T::from_f64(0.0); K]); n]
+    }
+
+    /// Returns a panel to the pool, which keeps at most one per rayon thread.
+    fn give_back_panel<const K: usize>(&self, panel: Vec<kernel::Row<T, K>>) {
+        let mut pool = self.pool.panels.lock().unwrap_or_else(|e| e.into_inner());
+        if pool.len() < rayon::current_num_threads().max(1) {
+            pool.push(Box::new(panel));
+        }
+    }
+
+    /// Frees the panels kept for later solves (see
+    /// [`CholeskyFactor::solve_in_place`]); the next solve allocates anew.
+    pub fn release_workspace(&self) {
+        self.pool
+            .panels
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clear();
+    }
+
     /// Permutes the chunk into a row-major panel of width `K`, runs the
     /// supernodal substitutions on it, and permutes the result back.
     ///
     /// Both permutations walk the caller's rows in order (sequential streams
     /// through every column) and move one whole panel row at a time.
     fn solve_chunk_k<const K: usize>(&self, mut rhs: MatMut<'_, T>) {
-        let n = self.dim();
         let k = rhs.ncols();
         debug_assert!(k <= K);
         let inv = &self.symbolic.perm_inv[..];
         let zero = T::from_f64(0.0);
-        let mut panel = vec![[zero; K]; n];
+        let mut panel = self.take_panel::<K>();
         let cols: Option<Vec<&[T]>> = (0..k)
             .map(|j| rhs.rb().col(j).try_as_col_major().map(|c| c.as_slice()))
             .collect();
         match cols {
             Some(cols) => {
                 for (o, &p) in inv.iter().enumerate() {
-                    let row = &mut panel[p];
+                    let row = &mut panel[p].0;
                     for (x, c) in row.iter_mut().zip(&cols) {
                         *x = c[o];
                     }
+                    row[k..].fill(zero);
                 }
             }
             None => {
                 for (o, &p) in inv.iter().enumerate() {
                     for j in 0..k {
-                        panel[p][j] = rhs[(o, j)];
+                        panel[p].0[j] = rhs[(o, j)];
                     }
+                    panel[p].0[k..].fill(zero);
                 }
             }
         }
         let sn = kernel::Supernodes::new(self.symbolic.supernodal());
-        kernel::solve_panel::<T, K>(self.symbolic.isa, &sn, &self.values, &mut panel);
+        let isa = self.symbolic.isa;
+        // register tiles: two 256-bit vectors of lanes, eight in the dense
+        // backward block (see `kernel`)
+        let single = std::mem::size_of::<T>() == 4;
+        let v = &self.values;
+        match K {
+            8 => kernel::solve_panel::<T, K, 8, 8>(isa, &sn, v, &mut panel),
+            16 if single => kernel::solve_panel::<T, K, 16, 16>(isa, &sn, v, &mut panel),
+            16 => kernel::solve_panel::<T, K, 8, 16>(isa, &sn, v, &mut panel),
+            _ if single => kernel::solve_panel::<T, K, 16, 32>(isa, &sn, v, &mut panel),
+            _ => kernel::solve_panel::<T, K, 8, 32>(isa, &sn, v, &mut panel),
+        }
         let mut cols: Vec<&mut [T]> = rhs
             .rb_mut()
             .col_iter_mut()
@@ -616,7 +705,7 @@ impl<T: Real> CholeskyFactor<T> {
             .collect();
         if cols.len() == k {
             for (o, &p) in inv.iter().enumerate() {
-                let row = &panel[p];
+                let row = &panel[p].0;
                 for (c, &x) in cols.iter_mut().zip(row) {
                     c[o] = x;
                 }
@@ -625,9 +714,10 @@ impl<T: Real> CholeskyFactor<T> {
             drop(cols);
             for (o, &p) in inv.iter().enumerate() {
                 for j in 0..k {
-                    rhs[(o, j)] = panel[p][j];
+                    rhs[(o, j)] = panel[p].0[j];
                 }
             }
         }
+        self.give_back_panel(panel);
     }
 }
