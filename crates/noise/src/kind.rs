@@ -22,12 +22,17 @@ pub const DEFAULT_TAU: f64 = 100.0;
 /// | [`Naive`](Self::Naive) | `n` | `phi_i^T M^2 phi_i` |
 /// | [`White`](Self::White) | `M^-1/2 n` | `1` |
 /// | [`Matern`](Self::Matern) | solve `(L + tau M) f = M^1/2 n` | `1 / (lambda_i + tau)^2` |
+/// | [`Matern`](Self::Matern), `tau = 0` | `f = L^+ P M^1/2 n` (pseudo-inverse, mean-free per component) | `1 / lambda_i^2`, `0` for the zero modes |
 /// | [`MaternNormalized`](Self::MaternNormalized) | `sqrt(Gamma) f`, `f` Matérn with `tau = c Gamma` | `Gamma / (lambda_i + c Gamma)^2` |
 /// | [`Explicit`](Self::Explicit) | `sum_{i<k} chi_i / (lambda_i + tau) phi_i`, `chi ~ N(0, I_k)` | `1 / (lambda_i + tau)^2` for `i < k`, else `0` |
 ///
 /// Serialized (serde) with an internal `kind` tag in snake case, e.g.
 /// `{"kind":"matern","tau":100.0}`, `{"kind":"matern_normalized","c":0.5}`,
 /// `{"kind":"explicit","k":64,"tau":100.0}`, `{"kind":"white"}`.
+///
+/// `P` is the projection that removes the zero modes (the constants of each
+/// connected component, where `L` vanishes) from a right-hand side; see
+/// [`Matern`](Self::Matern).
 ///
 /// It also parses from and prints to a short command-line form (see
 /// [`FromStr`](#impl-FromStr-for-NoiseKind)): `naive`, `white`,
@@ -41,6 +46,8 @@ pub const DEFAULT_TAU: f64 = 100.0;
 /// assert_eq!(kind, NoiseKind::Explicit { k: 32, tau: 50.0 });
 /// assert_eq!(kind.to_string(), "explicit:32:50");
 /// assert_eq!("matern".parse::<NoiseKind>().unwrap(), NoiseKind::Matern { tau: 100.0 });
+/// // Matérn noise without screening (the paper's "no screening" ablation)
+/// assert_eq!("matern:0".parse::<NoiseKind>().unwrap(), NoiseKind::Matern { tau: 0.0 });
 /// let json = serde_json::to_string(&NoiseKind::MaternNormalized { c: 0.5 }).unwrap();
 /// assert_eq!(json, r#"{"kind":"matern_normalized","c":0.5}"#);
 /// ```
@@ -51,9 +58,18 @@ pub enum NoiseKind {
     Naive,
     /// Discrete white noise `M^-1/2 n`: spectrally `N(0, I)`.
     White,
-    /// Matérn noise (paper Alg. 1): `(L + tau M) f = M^1/2 n`, `tau > 0`.
+    /// Matérn noise (paper Alg. 1): `(L + tau M) f = M^1/2 n`, `tau >= 0`.
+    ///
+    /// `tau = 0` (no screening, the paper's ablation) is the pseudo-inverse
+    /// `f = L^+ M^1/2 n`: `L` is singular (it vanishes on the functions that
+    /// are constant on each connected component), so the zero-mode part of
+    /// the right-hand side is projected out before the solve and the sample
+    /// has zero mass-weighted mean on every connected component. Spectrally
+    /// `Var(c_i) = 1 / lambda_i^2` for `lambda_i > 0` and `0` for the zero
+    /// modes. See [`NoiseSampler`](crate::NoiseSampler) for how it is solved.
     Matern {
-        /// Screening weight, `> 0` (units of an eigenvalue: 1 / length²).
+        /// Screening weight, `>= 0` (units of an eigenvalue: 1 / length²);
+        /// `0` means no screening.
         tau: f64,
     },
     /// Scale-normalized Matérn noise (paper Alg. 2): `tau = c Gamma`, the
@@ -76,8 +92,8 @@ pub enum NoiseKind {
 }
 
 impl NoiseKind {
-    /// Checks the parameters: `tau > 0` for Matérn, `c > 0`, `k >= 1` and
-    /// `tau >= 0` for explicit, all finite.
+    /// Checks the parameters: `tau >= 0` for Matérn and explicit, `c > 0`,
+    /// `k >= 1`, all finite.
     ///
     /// # Errors
     /// [`NoiseError::InvalidParameter`] naming the offending parameter.
@@ -91,8 +107,8 @@ impl NoiseKind {
         };
         match *self {
             Self::Naive | Self::White => Ok(()),
-            Self::Matern { tau } if !(tau.is_finite() && tau > 0.0) => {
-                bad("tau", "a finite value > 0", tau)
+            Self::Matern { tau } if !(tau.is_finite() && tau >= 0.0) => {
+                bad("tau", "a finite value >= 0 (0: no screening)", tau)
             }
             Self::MaternNormalized { c } if !(c.is_finite() && c > 0.0) => {
                 bad("c", "a finite value > 0", c)

@@ -1,14 +1,16 @@
 //! # mfm-noise
 //!
 //! Triangulation-agnostic noise on triangle meshes (paper §3, DESIGN.md §4):
-//! Matérn noise sampled by one screened Poisson solve, its scale-normalized
+//! Matérn noise sampled by one screened Poisson solve (also without
+//! screening, `tau = 0`, as a pseudo-inverse), its scale-normalized
 //! variant, discrete white noise, naive per-vertex noise and an explicit
 //! truncated-spectrum sampler, plus spectral diagnostics that measure the
 //! paper's three properties and PNG plots of them.
 //!
 //! - [`NoiseKind`]: which noise (serde, and a short `matern:100` text form).
 //! - [`NoiseSampler`]: built once per mesh (operators, Cholesky factor of
-//!   `L + tau M` or eigenpairs), then [`NoiseSampler::sample`] draws a
+//!   `L + tau M` — of `L + 1e-10 Gamma M` with the zero modes projected out
+//!   when `tau = 0` — or eigenpairs), then [`NoiseSampler::sample`] draws a
 //!   [`NoiseBatch`] `[samples, vertices, channels]` from a seed, bit-identically
 //!   for any thread count.
 //! - [`spectrum`]: coefficients `c_i = phi_i^T M f`, empirical against

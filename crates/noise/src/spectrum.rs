@@ -132,7 +132,9 @@ impl NoiseSampler {
 ///
 /// - naive: `phi_i^T M^2 phi_i`;
 /// - white: `1`;
-/// - Matérn: `1 / (lambda_i + tau)^2`;
+/// - Matérn: `1 / (lambda_i + tau)^2`; without screening (`tau == 0`),
+///   `1 / lambda_i^2` and `0` for the zero modes (eigenvalues at or below
+///   `1e-8` times the largest one in `pairs`, as for the explicit kind);
 /// - normalized Matérn: `Gamma / (lambda_i + c Gamma)^2`;
 /// - explicit `(k, tau)`: `1 / (lambda_i + tau)^2` for `i < k` (`0` for the
 ///   zero modes when `tau == 0`), `0` for `i >= k`.
@@ -163,6 +165,10 @@ pub fn theoretical_variance(
             })
             .collect(),
         NoiseKind::White => vec![1.0; values.len()],
+        NoiseKind::Matern { tau: 0.0 } => explicit_weights(values, 0.0)
+            .into_iter()
+            .map(|w| w * w)
+            .collect(),
         NoiseKind::Matern { tau } => values.iter().map(|l| (l + tau).powi(-2)).collect(),
         NoiseKind::MaternNormalized { c } => values
             .iter()

@@ -264,8 +264,9 @@ fn plots_are_written() {
 fn errors_name_the_problem() {
     let mesh = common::blob(1);
     for (kind, name) in [
-        (NoiseKind::Matern { tau: 0.0 }, "tau"),
+        (NoiseKind::Matern { tau: -1.0 }, "tau"),
         (NoiseKind::Matern { tau: f64::NAN }, "tau"),
+        (NoiseKind::Matern { tau: f64::INFINITY }, "tau"),
         (NoiseKind::MaternNormalized { c: -1.0 }, "c"),
         (NoiseKind::Explicit { k: 0, tau: 1.0 }, "k"),
         (NoiseKind::Explicit { k: 3, tau: -1.0 }, "tau"),
@@ -328,17 +329,27 @@ fn errors_name_the_problem() {
             "{bad:?}"
         );
     }
-    assert!(matches!(
-        "matern:0".parse::<NoiseKind>(),
-        Err(NoiseError::InvalidParameter { .. })
-    ));
+    for bad in ["matern:-1", "matern:-1e-300", "matern:NaN", "matern:inf"] {
+        assert!(
+            matches!(
+                bad.parse::<NoiseKind>(),
+                Err(NoiseError::InvalidParameter { name: "tau", .. })
+            ),
+            "{bad:?}"
+        );
+    }
+    // tau = 0 (no screening) is allowed
+    assert_eq!(
+        "matern:0".parse::<NoiseKind>().unwrap(),
+        NoiseKind::Matern { tau: 0.0 }
+    );
 }
 
 fn any_kind() -> impl Strategy<Value = NoiseKind> {
     prop_oneof![
         Just(NoiseKind::Naive),
         Just(NoiseKind::White),
-        (1e-6f64..1e6).prop_map(|tau| NoiseKind::Matern { tau }),
+        prop_oneof![Just(0.0), 1e-6f64..1e6].prop_map(|tau| NoiseKind::Matern { tau }),
         (1e-9f64..1e3).prop_map(|c| NoiseKind::MaternNormalized { c }),
         (1usize..5000, prop_oneof![Just(0.0), 1e-6f64..1e6])
             .prop_map(|(k, tau)| NoiseKind::Explicit { k, tau }),

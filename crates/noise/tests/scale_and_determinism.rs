@@ -74,6 +74,7 @@ fn samples_are_bit_identical_across_thread_counts_and_batch_cuts() {
     let mesh = common::blob(3);
     let kinds = [
         NoiseKind::Matern { tau: 100.0 },
+        NoiseKind::Matern { tau: 0.0 },
         NoiseKind::MaternNormalized { c: 0.01 },
         NoiseKind::White,
         NoiseKind::Naive,
@@ -207,6 +208,7 @@ fn f32_samples_are_bit_identical_across_thread_counts_and_batch_cuts() {
     let (n, c, seed) = (150, 3, 0xbeef);
     for kind in [
         NoiseKind::Matern { tau: 100.0 },
+        NoiseKind::Matern { tau: 0.0 },
         NoiseKind::MaternNormalized { c: 0.01 },
         NoiseKind::White,
         NoiseKind::Naive,
