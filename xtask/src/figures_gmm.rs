@@ -12,11 +12,12 @@
 //! `table.json`, and per kind the run folder, the samples and
 //! `means_KIND.png` (point-wise mean, generated vs reference).
 
+use crate::flow_steps::{Mfm, arg, fresh_dir, mesh_or_shared, out_dir, tag};
 use crate::pyenv::PyEnv;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde_json::Value;
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 /// Arguments of `reproduce-figures gmm`.
@@ -46,124 +47,61 @@ pub struct GmmArgs {
     pub seed: u64,
 }
 
-fn mfm_live(exe: &Path, args: &[&str]) -> Result<()> {
-    println!("$ mfm {}", args.join(" "));
-    crate::demo::mfm_live(exe, args)
-}
-
 /// Runs the experiment.
 pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
-    let root = crate::root();
-    let out = if args.out.is_absolute() {
-        args.out.clone()
-    } else {
-        root.join(&args.out)
-    };
-    let mesh = match &args.mesh {
-        Some(m) => m.clone(),
-        None => {
-            let bunny = root.join("../shared/meshes/bunny.off");
-            if bunny.is_file() {
-                bunny.to_string_lossy().into_owned()
-            } else {
-                println!("../shared/meshes/bunny.off not found: using builtin:blob");
-                "builtin:blob".to_owned()
-            }
-        }
-    };
+    let out = out_dir(&args.out);
+    let mesh = mesh_or_shared(args.mesh.as_deref(), "bunny.off", "builtin:blob");
     let exe = crate::demo::mfm_binary(env)?;
+    let mfm = Mfm { exe: &exe };
     let start = Instant::now();
-    if out.exists() {
-        std::fs::remove_dir_all(&out)
-            .with_context(|| format!("cannot remove the previous {}", out.display()))?;
-    }
-    std::fs::create_dir_all(&out)?;
-    let s = |p: &Path| p.to_string_lossy().into_owned();
+    fresh_dir(&out)?;
     let data = out.join("data");
-    let seed = args.seed.to_string();
-    mfm_live(
-        &exe,
-        &[
-            "dataset",
-            "gmm",
-            "--mesh",
-            &mesh,
-            "--out",
-            &s(&data),
-            "--n",
-            &args.n.to_string(),
-            "--reference",
-            &args.reference.to_string(),
-            "--seed",
-            &seed,
-        ],
-    )?;
+    mfm.run(&[
+        "dataset",
+        "gmm",
+        "--mesh",
+        &mesh,
+        "--out",
+        &arg(&data),
+        "--n",
+        &args.n.to_string(),
+        "--reference",
+        &args.reference.to_string(),
+        "--seed",
+        &args.seed.to_string(),
+    ])?;
     let dataset_seconds = start.elapsed().as_secs_f64();
     let test_mesh = data.join("reference/mesh.ply");
+    let reference = arg(&data.join("reference"));
     let mut rows: Vec<(String, Value, f64, f64)> = Vec::new();
     for kind in &args.kinds {
-        let tag: String = kind
-            .chars()
-            .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
-            .collect();
+        let tag = tag(kind);
         let run = out.join(format!("run_{tag}"));
-        let t = Instant::now();
-        mfm_live(
-            &exe,
-            &[
-                "train",
-                "--preset",
-                "cpu",
-                "--dataset",
-                &s(&data.join("train")),
-                "--out",
-                &s(&run),
-                "--steps",
-                &args.steps.to_string(),
-                "--seed",
-                &seed,
-                "--noise",
-                kind,
-                "--quiet",
-            ],
+        let train_seconds = mfm.train(
+            "cpu",
+            &data.join("train"),
+            &run,
+            args.steps,
+            args.seed,
+            kind,
         )?;
-        let train_seconds = t.elapsed().as_secs_f64();
         let samples = out.join(format!("samples_{tag}"));
         let t = Instant::now();
-        mfm_live(
-            &exe,
-            &[
-                "sample",
-                "--run",
-                &s(&run),
-                "--mesh",
-                &s(&test_mesh),
-                "--n",
-                &args.reference.to_string(),
-                "--seed",
-                &seed,
-                "--out",
-                &s(&samples),
-            ],
-        )?;
+        let sampled = mfm.sample(&run, &test_mesh, args.reference, args.seed, &samples, &[]);
         let sample_seconds = t.elapsed().as_secs_f64();
-        let metrics_path = out.join(format!("metrics_{tag}.json"));
-        mfm_live(
-            &exe,
-            &[
-                "eval",
-                "--samples",
-                &s(&samples.join("samples.npy")),
-                "--reference",
-                &s(&data.join("reference")),
-                "--out",
-                &s(&metrics_path),
-                "--png",
-                &s(&out.join(format!("means_{tag}.png"))),
-            ],
+        if let Err(e) = sampled {
+            // a kind whose sampling breaks down is a result, not a crash
+            println!("{kind}: sampling failed: {e:#}");
+            let failed = serde_json::json!({ "error": format!("{e:#}") });
+            rows.push((kind.clone(), failed, train_seconds, sample_seconds));
+            continue;
+        }
+        let metrics = mfm.eval(
+            &samples.join("samples.npy"),
+            &["--reference", &reference],
+            &out.join(format!("metrics_{tag}.json")),
+            Some(&out.join(format!("means_{tag}.png"))),
         )?;
-        let metrics: Value = serde_json::from_str(&std::fs::read_to_string(&metrics_path)?)
-            .with_context(|| format!("reading {}", metrics_path.display()))?;
         rows.push((kind.clone(), metrics, train_seconds, sample_seconds));
     }
     let f = |v: &Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
@@ -180,6 +118,12 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
     )?;
     let mut csv = String::from("noise,test_error,mmd,cov,one_nna,train_seconds,sample_seconds\n");
     for (kind, m, tr, sa) in &rows {
+        if let Some(e) = m["error"].as_str() {
+            let short = e.lines().next().unwrap_or(e);
+            writeln!(md, "| {kind} | failed: {short} | | | | {tr:.0} | {sa:.1} |")?;
+            writeln!(csv, "{kind},,,,,{tr:.1},{sa:.2}")?;
+            continue;
+        }
         writeln!(
             md,
             "| {kind} | {:.4} | {:.4} | {:.3} | {:.3} | {tr:.0} | {sa:.1} |",

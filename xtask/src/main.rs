@@ -10,6 +10,8 @@
 //! - `bench noise`: Matérn sampling, ours against CHOLMOD and cholespy, in one run.
 //! - `reproduce-figures gmm`: the paper's GMM table at CPU scale (noise
 //!   kinds compared on a non-uniform test mesh).
+//! - `reproduce-figures deform`: the paper's deformation experiments at CPU
+//!   scale (noise ablation, generalization, resolutions, robustness).
 //! - `reproduce-figures spectral`: the paper's noise figures (per-frequency
 //!   statistics, spectrum, fixed vs normalized tau, noise on a non-uniform
 //!   triangulation) and the numbers behind them, from scratch.
@@ -22,7 +24,9 @@ mod bench;
 mod bench_noise;
 mod demo;
 mod figures;
+mod figures_deform;
 mod figures_gmm;
+mod flow_steps;
 mod pyenv;
 mod visual_check;
 
@@ -83,6 +87,10 @@ enum FiguresCmd {
     /// The paper's GMM table at CPU scale: matern vs white vs naive noise,
     /// trained on a uniform mesh, evaluated on a non-uniform one.
     Gmm(figures_gmm::GmmArgs),
+    /// The paper's deformation experiments at CPU scale: ARAP poses of a real
+    /// mesh, noise ablation table, generalization, generation across
+    /// resolutions, robustness to holes, partial meshes and edge flips.
+    Deform(figures_deform::DeformArgs),
 }
 
 #[derive(Subcommand)]
@@ -226,6 +234,10 @@ fn main() -> Result<()> {
         Cmd::ReproduceFigures(FiguresCmd::Gmm(args)) => {
             let env = pyenv::ensure()?;
             figures_gmm::gmm(&env, &args)
+        }
+        Cmd::ReproduceFigures(FiguresCmd::Deform(args)) => {
+            let env = pyenv::ensure()?;
+            figures_deform::deform(&env, &args)
         }
         Cmd::Mfm { args } => {
             let env = pyenv::ensure()?;

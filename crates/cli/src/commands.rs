@@ -131,6 +131,10 @@ pub enum Command {
     /// PoissonNet: layer tables of the presets and training-step benchmarks.
     #[command(subcommand)]
     Net(crate::net::NetCommand),
+    /// Another triangulation of a mesh's surface: midpoint subdivision, and
+    /// damage (holes, a partial cut, edge flips) that spares the handle
+    /// regions of a deformation space.
+    Remesh(crate::remesh::RemeshArgs),
 }
 
 /// Per-vertex quantities `mfm render --scalar` can show.
@@ -193,6 +197,7 @@ pub fn run(cmd: Command) -> Result<()> {
         Command::Sample(args) => crate::flow::sample(args),
         Command::Eval(args) => crate::flow::eval(args),
         Command::Net(cmd) => crate::net::run(cmd),
+        Command::Remesh(args) => crate::remesh::run(args),
     }
 }
 
@@ -271,7 +276,7 @@ fn convert(spec: &str, out: &std::path::Path) -> Result<()> {
     Ok(())
 }
 
-fn write_mesh(mesh: &TriMesh, out: &std::path::Path) -> Result<()> {
+pub(crate) fn write_mesh(mesh: &TriMesh, out: &std::path::Path) -> Result<()> {
     let ext = out
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());

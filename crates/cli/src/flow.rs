@@ -8,6 +8,7 @@ use clap::{Args, Subcommand};
 use mfm_fm::checkpoint::CONFIG_FILE;
 use mfm_fm::config::{OdeMethod, RunConfig};
 use mfm_fm::dataset::{Dataset, Manifest};
+use mfm_fm::deformations::{self, DeformManifest, DeformMeshes};
 use mfm_fm::experiment::GmmMeshes;
 use mfm_fm::gmm::{GenerateOptions, GmmConfig, GmmDistance, GmmGenerator};
 use mfm_fm::metrics::Metrics;
@@ -30,6 +31,55 @@ pub enum DatasetCommand {
     /// the same surface), each a dataset folder (mesh, signals.npy,
     /// manifest.json), and OUT/preview.png.
     Gmm(GmmArgs),
+    /// Elastic-looking poses of a mesh: as-rigid-as-possible deformations
+    /// driven by random rigid motions of a few handle regions (feet, trunk,
+    /// tail... picked automatically at the extremities) around a fixed
+    /// anchor. The mesh is normalized (unit bounding-box diagonal) and
+    /// decimated to the training resolution. Writes OUT/train (shapes on the
+    /// coarse mesh), OUT/reference (held-out shapes on a finer, non-uniform
+    /// triangulation: the coarse mesh with one half refined twice),
+    /// OUT/holdout (the same held-out parameters on the coarse mesh),
+    /// OUT/{original,coarse,eval}.ply, OUT/space.json (handles and ranges)
+    /// and OUT/preview.png. Each dataset folder has params.json with every
+    /// sample's handle parameters.
+    Deform(DeformArgs),
+}
+
+/// Arguments of `mfm dataset deform`.
+#[derive(Args)]
+pub struct DeformArgs {
+    /// The mesh to deform (a file or builtin:NAME), e.g.
+    /// ../shared/meshes/elephant.obj.
+    #[arg(long)]
+    mesh: String,
+    /// Output folder (must not exist or be empty).
+    #[arg(long)]
+    out: PathBuf,
+    /// Training shapes.
+    #[arg(long, default_value_t = 400)]
+    n: usize,
+    /// Held-out shapes (reference set on the evaluation mesh, and the same
+    /// parameters on the coarse mesh).
+    #[arg(long, default_value_t = 100)]
+    reference: usize,
+    /// Moving handles (the anchor comes on top).
+    #[arg(long, default_value_t = 5)]
+    handles: usize,
+    /// Handle radius as a fraction of the bounding-box diagonal.
+    #[arg(long, default_value_t = 0.08)]
+    radius: f64,
+    /// Largest handle rotation, in radians.
+    #[arg(long, default_value_t = 0.5)]
+    max_angle: f64,
+    /// Largest handle translation, as a fraction of the bounding-box diagonal.
+    #[arg(long, default_value_t = 0.12)]
+    max_shift: f64,
+    /// Faces of the coarse training mesh.
+    #[arg(long, default_value_t = 3000)]
+    coarse_faces: usize,
+    /// Seed (held-out shapes use their own stream of the same seed).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
 }
 
 /// Arguments of `mfm dataset gmm`.
@@ -77,8 +127,9 @@ pub struct TrainArgs {
     /// are an error). Without it, --preset gives the configuration.
     #[arg(long, conflicts_with = "preset")]
     config: Option<PathBuf>,
-    /// Named configuration: `cpu` (minutes on a laptop) or `paper` (the
-    /// paper's recipe, for a GPU).
+    /// Named configuration: `cpu` (minutes on a laptop), `cpu-deform` (`cpu`
+    /// conditioned on the source xyz, with scale/shift augmentation, for
+    /// `mfm dataset deform` data) or `paper` (the paper's recipe, for a GPU).
     #[arg(long)]
     preset: Option<String>,
     /// Dataset folder (overrides the configuration's dataset.path).
@@ -143,19 +194,153 @@ pub struct EvalArgs {
     #[arg(long)]
     samples: PathBuf,
     /// Reference dataset folder (its mesh is the mesh the samples live on).
+    #[arg(long, required_unless_present = "space")]
+    reference: Option<PathBuf>,
+    /// Without a reference set: the space.json of `mfm dataset deform`; only
+    /// the projection (plausibility) error is computed, on --mesh.
+    #[arg(long, requires = "mesh", conflicts_with = "reference")]
+    space: Option<PathBuf>,
+    /// The mesh the samples live on (with --space).
     #[arg(long)]
-    reference: PathBuf,
+    mesh: Option<String>,
     /// Write the metrics as JSON here.
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Render the point-wise means (generated vs reference) to this PNG.
+    /// Render the point-wise means (generated vs reference) to this PNG; for
+    /// a deformation reference set (`mfm dataset deform`), the first
+    /// generated shapes beside their projections onto the deformation space.
     #[arg(long)]
     png: Option<PathBuf>,
 }
 
-/// Runs `mfm dataset gmm`.
+/// Runs `mfm dataset ...`.
 pub fn dataset(cmd: DatasetCommand) -> Result<()> {
-    let DatasetCommand::Gmm(a) = cmd;
+    match cmd {
+        DatasetCommand::Gmm(a) => dataset_gmm(a),
+        DatasetCommand::Deform(a) => dataset_deform(a),
+    }
+}
+
+/// Runs `mfm dataset deform`.
+fn dataset_deform(a: DeformArgs) -> Result<()> {
+    if a.n == 0 {
+        bail!("--n must be at least 1");
+    }
+    ensure_empty(&a.out)?;
+    let t0 = std::time::Instant::now();
+    let input = load_mesh(&a.mesh)?;
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let meshes = DeformMeshes::from_mesh(&input, a.coarse_faces)
+        .with_context(|| format!("preparing the meshes of {}", a.mesh))?;
+    let space = deformations::space_for(
+        &meshes.original,
+        a.handles,
+        a.radius,
+        a.max_angle,
+        a.max_shift,
+    )
+    .with_context(|| format!("placing {} handles on {}", a.handles, a.mesh))?;
+    for (role, m) in [
+        ("original", &meshes.original),
+        ("coarse", &meshes.coarse),
+        ("eval", &meshes.eval),
+    ] {
+        let regions = space.handles.regions(m)?;
+        let sizes: Vec<String> = regions.iter().map(|r| r.len().to_string()).collect();
+        println!(
+            "{role:>8} mesh: {:>6} vertices, {:>6} faces; handle vertices (anchor first): {}",
+            m.num_vertices(),
+            m.num_faces(),
+            sizes.join(", ")
+        );
+        io::write_ply(a.out.join(format!("{role}.ply")), m, &[])?;
+    }
+    write_json(&a.out.join("space.json"), &space)?;
+    let norm = meshes.normalization;
+    let held_out_seed = a.seed ^ 0x5eed_0f2e_f5e7;
+    let train = deformations::write_dataset(
+        &a.out.join("train"),
+        &meshes.coarse,
+        &space,
+        a.seed,
+        0..a.n,
+        norm,
+        "coarse",
+        &format!(
+            "mfm dataset deform: training shapes on the coarse mesh of {}",
+            a.mesh
+        ),
+        true,
+    )?;
+    if a.reference > 0 {
+        deformations::write_dataset(
+            &a.out.join("reference"),
+            &meshes.eval,
+            &space,
+            held_out_seed,
+            0..a.reference,
+            norm,
+            "eval",
+            &format!(
+                "mfm dataset deform: held-out shapes on the evaluation mesh of {}",
+                a.mesh
+            ),
+            true,
+        )?;
+        deformations::write_dataset(
+            &a.out.join("holdout"),
+            &meshes.coarse,
+            &space,
+            held_out_seed,
+            0..a.reference,
+            norm,
+            "coarse",
+            &format!(
+                "mfm dataset deform: held-out shapes on the coarse mesh of {}",
+                a.mesh
+            ),
+            true,
+        )?;
+    }
+    let preview = train.load_all()?;
+    let shapes: Vec<TriMesh> = (0..preview.len().min(8))
+        .map(|i| meshes.coarse.with_positions(positions_of(&preview, i)))
+        .collect::<Result<_, _>>()?;
+    let mut panels = vec![Panel::new(&meshes.coarse, None, "rest")];
+    panels.extend(
+        shapes
+            .iter()
+            .enumerate()
+            .map(|(i, m)| Panel::new(m, None, format!("shape {i}"))),
+    );
+    save_grid(
+        &panels,
+        3,
+        "deformation training shapes",
+        ColorRange::Auto,
+        &a.out.join("preview.png"),
+    )?;
+    println!(
+        "wrote {} ({} training shapes, {} held out) in {:.1} s",
+        a.out.display(),
+        a.n,
+        a.reference,
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Signal `i` of a 3-channel set as vertex positions.
+fn positions_of(s: &InMemorySignals, i: usize) -> Vec<[f64; 3]> {
+    s.signal(i)
+        .chunks_exact(3)
+        .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
+        .collect()
+}
+
+/// Runs `mfm dataset gmm`.
+fn dataset_gmm(a: GmmArgs) -> Result<()> {
     let config = GmmConfig {
         bumps: a.bumps,
         sigma: a.sigma,
@@ -291,7 +476,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
         let mut config = match (&a.config, &a.preset) {
             (Some(path), _) => RunConfig::from_toml_file(path)?,
             (None, Some(name)) => RunConfig::preset(name)?,
-            (None, None) => bail!("give --config run.toml or --preset cpu|paper"),
+            (None, None) => bail!("give --config run.toml or --preset cpu|cpu-deform|paper"),
         };
         if let Some(d) = &a.dataset {
             config.dataset.path = Some(d.clone());
@@ -392,12 +577,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         let path = a.out.join(format!("sample_{i:03}.ply"));
         if c == 3 {
             // Three channels are vertex positions: write the deformed mesh.
-            let s = signals.signal(i);
-            let positions = s
-                .chunks(3)
-                .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
-                .collect();
-            io::write_ply(&path, &mesh.with_positions(positions)?, &[])?;
+            io::write_ply(&path, &mesh.with_positions(positions_of(&signals, i))?, &[])?;
         } else {
             let columns: Vec<Vec<f64>> = (0..c).map(|k| channel(&signals, i, k)).collect();
             let names: Vec<String> = (0..c)
@@ -421,14 +601,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     let values: Vec<Vec<f64>> = (0..k).map(|i| channel(&signals, i, 0)).collect();
     let deformed: Vec<TriMesh> = if c == 3 {
         (0..k)
-            .map(|i| {
-                let p = signals
-                    .signal(i)
-                    .chunks(3)
-                    .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
-                    .collect();
-                mesh.with_positions(p)
-            })
+            .map(|i| mesh.with_positions(positions_of(&signals, i)))
             .collect::<Result<_, _>>()?
     } else {
         Vec::new()
@@ -474,22 +647,41 @@ pub fn sample(a: SampleArgs) -> Result<()> {
 
 /// Runs `mfm eval`.
 pub fn eval(a: EvalArgs) -> Result<()> {
-    let reference = Dataset::open(&a.reference)?;
     let generated = read_npy_f32(&a.samples)?;
+    let Some(reference_dir) = &a.reference else {
+        return eval_plausibility_only(&a, &generated);
+    };
+    let reference = Dataset::open(reference_dir)?;
     if generated.num_vertices() != reference.num_vertices() {
         bail!(
             "{}: samples have {} vertices but the reference mesh ({}) has {}; sample on the reference's mesh",
             a.samples.display(),
             generated.num_vertices(),
-            a.reference.display(),
+            reference_dir.display(),
             reference.num_vertices()
         );
     }
     let mesh = reference.mesh().clone();
+    let deform = DeformManifest::of(&reference)?;
     let ops = operators::Operators::new(&mesh)?;
     let mass: Vec<f64> = ops.mass.clone();
     let reference = reference.load_all()?;
     let metrics = Metrics::evaluate(&mass, &generated, &reference)?;
+    let mut report = serde_json::to_value(&metrics)?;
+    if let Some(d) = &deform {
+        let p = deformations::plausibility(&d.space, &mesh, &generated, 4)?;
+        let r = deformations::plausibility(&d.space, &mesh, &reference, 0)?;
+        println!(
+            "projection MSE (plausibility): generated mean {:.3e} median {:.3e}; reference mean {:.3e}",
+            p.mean, p.median, r.mean
+        );
+        report["projection_mse"] = p.mean.into();
+        report["projection_mse_median"] = p.median.into();
+        report["reference_projection_mse"] = r.mean.into();
+        if let Some(png) = &a.png {
+            save_projection_grid(&mesh, &generated, &p, png)?;
+        }
+    }
     println!(
         "MMD {:.5}  COV {:.3}  1-NNA {:.3}  test error {:.5}  ({} generated, {} reference)",
         metrics.mmd,
@@ -500,9 +692,9 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         metrics.num_reference
     );
     if let Some(out) = &a.out {
-        write_json(out, &metrics)?;
+        write_json(out, &report)?;
     }
-    if let Some(png) = &a.png {
+    if let (Some(png), None) = (&a.png, &deform) {
         let mean_gen = pointwise_mean(&generated);
         let mean_ref = pointwise_mean(&reference);
         let diff: Vec<f64> = mean_gen.iter().zip(&mean_ref).map(|(g, r)| g - r).collect();
@@ -529,6 +721,96 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         render::save_png(&img, &diff_png)?;
     }
     Ok(())
+}
+
+/// `mfm eval --space S --mesh M`: the projection error of 3-channel samples
+/// on `M`, with no reference set.
+fn eval_plausibility_only(a: &EvalArgs, generated: &InMemorySignals) -> Result<()> {
+    let (Some(space_path), Some(mesh_spec)) = (&a.space, &a.mesh) else {
+        bail!("give --reference DIR, or --space space.json with --mesh MESH");
+    };
+    let text = std::fs::read_to_string(space_path)
+        .with_context(|| format!("cannot read {}", space_path.display()))?;
+    let space: mfm_deform::DeformSpace = serde_json::from_str(&text).with_context(|| {
+        format!(
+            "{}: not a deformation space (space.json of mfm dataset deform)",
+            space_path.display()
+        )
+    })?;
+    let mesh = load_mesh(mesh_spec)?;
+    if generated.num_vertices() != mesh.num_vertices() || generated.channels() != 3 {
+        bail!(
+            "{}: samples are [{}, {}, {}] but {mesh_spec} has {} vertices (positions need 3 channels)",
+            a.samples.display(),
+            generated.len(),
+            generated.num_vertices(),
+            generated.channels(),
+            mesh.num_vertices()
+        );
+    }
+    let p = deformations::plausibility(&space, &mesh, generated, 4)?;
+    println!(
+        "projection MSE (plausibility): mean {:.3e} median {:.3e} ({} samples on {} vertices)",
+        p.mean,
+        p.median,
+        generated.len(),
+        mesh.num_vertices()
+    );
+    if let Some(out) = &a.out {
+        write_json(
+            out,
+            &serde_json::json!({
+                "projection_mse": p.mean,
+                "projection_mse_median": p.median,
+                "num_generated": generated.len(),
+                "vertices": mesh.num_vertices(),
+            }),
+        )?;
+    }
+    if let Some(png) = &a.png {
+        save_projection_grid(&mesh, generated, &p, png)?;
+    }
+    Ok(())
+}
+
+/// The first generated shapes beside their projections onto the
+/// deformation space.
+fn save_projection_grid(
+    mesh: &TriMesh,
+    generated: &InMemorySignals,
+    p: &deformations::Plausibility,
+    png: &Path,
+) -> Result<()> {
+    let shapes: Vec<TriMesh> = (0..p.projections.len())
+        .flat_map(|i| {
+            [
+                mesh.with_positions(positions_of(generated, i)),
+                mesh.with_positions(p.projections[i].clone()),
+            ]
+        })
+        .collect::<Result<_, _>>()?;
+    let panels: Vec<Panel<'_>> = shapes
+        .iter()
+        .enumerate()
+        .map(|(k, m)| {
+            let caption = if k % 2 == 0 {
+                format!("sample {} (MSE {:.1e})", k / 2, p.mse[k / 2])
+            } else {
+                format!("its projection {}", k / 2)
+            };
+            Panel::new(m, None, caption)
+        })
+        .collect();
+    save_grid(
+        &panels,
+        4,
+        &format!(
+            "generated shapes and their projections, mean MSE {:.2e}",
+            p.mean
+        ),
+        ColorRange::Auto,
+        png,
+    )
 }
 
 /// Point-wise mean of channel 0 over all signals.

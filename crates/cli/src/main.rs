@@ -8,6 +8,7 @@ mod flow;
 mod mesh_arg;
 mod net;
 mod output;
+mod remesh;
 mod spectral;
 
 use clap::Parser;

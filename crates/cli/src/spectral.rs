@@ -104,7 +104,7 @@ pub struct KindArgs {
     /// Noise kind.
     #[arg(long, value_enum, default_value = "matern")]
     pub kind: KindName,
-    /// Screening weight of matern and explicit (1/length^2; default 100).
+    /// Screening weight of matern and explicit (1/length^2; default 100; 0 = no screening).
     #[arg(long)]
     pub tau: Option<f64>,
     /// Dimensionless factor of matern-normalized (tau = c Gamma; default 1e-4).

@@ -579,3 +579,173 @@ fn gmm_dataset_train_sample_eval_end_to_end() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("vertices"), "{}", stderr(&o));
 }
+
+#[test]
+fn deformation_dataset_trains_on_coarse_and_samples_on_finer_meshes() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |s: &str| dir.path().join(s).to_string_lossy().into_owned();
+    // builtin:capsule, decimated to 300 faces for training
+    let o = mfm(&[
+        "dataset",
+        "deform",
+        "--mesh",
+        "builtin:capsule",
+        "--out",
+        &p("data"),
+        "--n",
+        "6",
+        "--reference",
+        "3",
+        "--handles",
+        "2",
+        "--radius",
+        "0.15",
+        "--coarse-faces",
+        "300",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "train/signals.npy",
+        "train/params.json",
+        "reference/signals.npy",
+        "holdout/signals.npy",
+        "original.ply",
+        "coarse.ply",
+        "eval.ply",
+        "space.json",
+        "preview.png",
+    ] {
+        assert!(dir.path().join("data").join(f).is_file(), "{f} missing");
+    }
+    let (shape, _) = read_npy_f32(&dir.path().join("data/train/signals.npy"));
+    assert_eq!((shape[0], shape[2]), (6, 3));
+    let params: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("data/train/params.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(params.as_array().unwrap().len(), 6);
+
+    // a tiny conditioned, augmented run on the coarse mesh
+    let config = "[model]\npreset = \"small\"\nwidth = 8\nblocks = 1\nvector_layers = 1\ncondition_on_xyz = true\n\
+                  [train]\nsteps = 3\nbatch = 2\ncheckpoint_every = 3\nlog_every = 1\n\
+                  [train.augment]\nscale = 0.1\nshift = 0.05\n[sample]\nsteps = 2\n";
+    std::fs::write(dir.path().join("run.toml"), config).unwrap();
+    let o = mfm(&[
+        "train",
+        "--config",
+        &p("run.toml"),
+        "--dataset",
+        &p("data/train"),
+        "--out",
+        &p("run"),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+
+    // resolution transfer: the original mesh and a 4x refinement of it
+    let o = mfm(&[
+        "remesh",
+        &p("data/original.ply"),
+        "--subdivide",
+        "1",
+        "--out",
+        &p("fine.ply"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for mesh in ["data/original.ply", "fine.ply"] {
+        let out = p(&format!("samples_{}", mesh.replace(['/', '.'], "_")));
+        let o = mfm(&[
+            "sample",
+            "--run",
+            &p("run"),
+            "--mesh",
+            &p(mesh),
+            "--n",
+            "2",
+            "--out",
+            &out,
+        ]);
+        assert!(o.status.success(), "{mesh}: {}", stderr(&o));
+        let (shape, values) = read_npy_f32(&Path::new(&out).join("samples.npy"));
+        assert_eq!((shape[0], shape[2]), (2, 3), "{mesh}");
+        assert!(values.iter().all(|x| x.is_finite()), "{mesh}");
+        // plausibility without a reference set
+        let o = mfm(&[
+            "eval",
+            "--samples",
+            &format!("{out}/samples.npy"),
+            "--space",
+            &p("data/space.json"),
+            "--mesh",
+            &p(mesh),
+            "--out",
+            &format!("{out}/projection.json"),
+        ]);
+        assert!(o.status.success(), "{mesh}: {}", stderr(&o));
+        let m: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(format!("{out}/projection.json")).unwrap(),
+        )
+        .unwrap();
+        assert!(m["projection_mse"].as_f64().unwrap() > 0.0, "{m}");
+    }
+
+    // held-out shapes score against the reference set with the projection metric
+    let o = mfm(&[
+        "sample",
+        "--run",
+        &p("run"),
+        "--mesh",
+        &p("data/eval.ply"),
+        "--n",
+        "3",
+        "--out",
+        &p("s_eval"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = mfm(&[
+        "eval",
+        "--samples",
+        &p("s_eval/samples.npy"),
+        "--reference",
+        &p("data/reference"),
+        "--out",
+        &p("m.json"),
+        "--png",
+        &p("shapes.png"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("m.json")).unwrap()).unwrap();
+    let (generated, reference) = (
+        m["projection_mse"].as_f64().unwrap(),
+        m["reference_projection_mse"].as_f64().unwrap(),
+    );
+    // an untrained model's shapes are far from the space; dataset shapes lie in it
+    assert!(reference < 1e-3 * generated, "{m}");
+    assert!(dir.path().join("shapes.png").is_file());
+
+    // damage keeps the handles: holes and flips give meshes the model samples on
+    let o = mfm(&[
+        "remesh",
+        &p("data/eval.ply"),
+        "--damage",
+        "medium-holes",
+        "--space",
+        &p("data/space.json"),
+        "--out",
+        &p("holes.ply"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = mfm(&[
+        "remesh",
+        &p("data/eval.ply"),
+        "--damage",
+        "dents",
+        "--space",
+        &p("data/space.json"),
+        "--out",
+        &p("x.ply"),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("small-holes"), "{}", stderr(&o));
+}

@@ -60,6 +60,9 @@ pub enum FmError {
     /// A sparse factorization or solve failed.
     #[error("solver: {0}")]
     Solver(#[from] mfm_solver::SolverError),
+    /// Generating, fitting or projecting a deformation failed.
+    #[error("deformation: {0}")]
+    Deform(#[from] mfm_deform::DeformError),
     /// Noise sampling failed.
     #[error("noise: {0}")]
     Noise(#[from] mfm_noise::NoiseError),

@@ -8,6 +8,7 @@
 pub mod checkpoint;
 pub mod config;
 pub mod dataset;
+pub mod deformations;
 pub mod error;
 pub mod experiment;
 pub mod geodesic;

@@ -396,15 +396,41 @@ impl Sampler {
         }
         let h = 1.0 / options.steps as f64;
         let mut x = x0.shallow_clone();
+        // A state that overflowed would reach the Poisson solves as NaN; say
+        // where the integration broke down instead.
+        let velocity = |x: &Tensor, t: f64, k: usize| -> Result<Tensor> {
+            let finite = bool::try_from(x.isfinite().all()).unwrap_or(false);
+            if !finite {
+                return Err(FmError::Config(format!(
+                    "sampling diverged at ODE step {k} of {} (t = {t:.3}): the state is not finite; \
+                     the model does not handle this mesh or noise (e.g. noise far larger than the \
+                     training data)",
+                    options.steps
+                )));
+            }
+            self.velocity(target, x, t).map_err(|e| match e {
+                FmError::Net(n) => FmError::Config(format!(
+                    "sampling failed at ODE step {k} of {} (t = {t:.3}): {n}",
+                    options.steps
+                )),
+                other => other,
+            })
+        };
         for k in 0..options.steps {
             let t = k as f64 * h;
             x = match options.method {
-                OdeMethod::Euler => &x + self.velocity(target, &x, t)? * h,
+                OdeMethod::Euler => &x + velocity(&x, t, k)? * h,
                 OdeMethod::Midpoint => {
-                    let mid = &x + self.velocity(target, &x, t)? * (h / 2.0);
-                    &x + self.velocity(target, &mid, t + h / 2.0)? * h
+                    let mid = &x + velocity(&x, t, k)? * (h / 2.0);
+                    &x + velocity(&mid, t + h / 2.0, k)? * h
                 }
             };
+        }
+        if !bool::try_from(x.isfinite().all()).unwrap_or(false) {
+            return Err(FmError::Config(format!(
+                "sampling diverged: the final state after {} ODE steps is not finite",
+                options.steps
+            )));
         }
         Ok(x)
     }

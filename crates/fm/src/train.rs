@@ -88,6 +88,7 @@ const RNG_DESCRIPTION: &str = "ChaCha8 streams keyed by (seed, purpose), stream 
 const PURPOSE_EPOCH: u64 = 1;
 const PURPOSE_TIME: u64 = 2;
 const PURPOSE_STATS: u64 = 3;
+const PURPOSE_AUGMENT: u64 = 4;
 
 /// Signals read (at most) to estimate data statistics.
 const STATS_SIGNALS: usize = 256;
@@ -703,6 +704,12 @@ impl Trainer {
         noise: NoiseSampler,
     ) -> Result<Self> {
         mfm_net::runtime::tune_allocator();
+        if config.train.augment.is_active() && flow.channels != 3 {
+            return Err(FmError::Config(format!(
+                "train.augment scales and shifts positions: it needs 3-channel signals, the dataset has {}",
+                flow.channels
+            )));
+        }
         if config.train.threads > 0 {
             tch::set_num_threads(config.train.threads as i32);
         }
@@ -803,6 +810,27 @@ impl Trainer {
         (idx, t)
     }
 
+    /// The augmentation of step `step` as `[B, 1, 1]` scales and `[B, 1, 3]`
+    /// shifts (see [`crate::config::Augment`]); `None` when off.
+    fn augmentation(&self, step: u64, b: usize) -> Option<(Tensor, Tensor)> {
+        let aug = self.config.train.augment;
+        if !aug.is_active() {
+            return None;
+        }
+        let mut rng = derived_rng(self.config.train.seed, PURPOSE_AUGMENT, step);
+        let mut scales = Vec::with_capacity(b);
+        let mut shifts = Vec::with_capacity(3 * b);
+        for _ in 0..b {
+            scales.push((1.0 + aug.scale * (2.0 * rng.random::<f64>() - 1.0)) as f32);
+            for _ in 0..3 {
+                shifts.push((aug.shift * (2.0 * rng.random::<f64>() - 1.0)) as f32);
+            }
+        }
+        let scales = Tensor::from_slice(&scales).reshape([b as i64, 1, 1]);
+        let shifts = Tensor::from_slice(&shifts).reshape([b as i64, 1, 3]);
+        Some((scales.to_device(self.device), shifts.to_device(self.device)))
+    }
+
     /// Runs optimizer step `self.step`.
     fn train_step(&mut self) -> Result<StepStats> {
         let s = self.step;
@@ -832,9 +860,13 @@ impl Trainer {
             .to_device(self.device);
         let t = Tensor::from_slice(&times).to_device(self.device);
         let tb = t.reshape([b as i64, 1, 1]);
+        let (x1, xyz) = match self.augmentation(s, b) {
+            Some((scale, shift)) => (&x1 * &scale + &shift, &self.xyz * &scale + &shift),
+            None => (x1, self.xyz.shallow_clone()),
+        };
         let xt = &x0 * (1.0 - &tb) + &x1 * &tb;
         let delta = &x1 - &x0;
-        let cond = conditioning(&self.flow, &self.xyz, &t);
+        let cond = conditioning(&self.flow, &xyz, &t);
 
         self.adam.zero_grad();
         let mut out = self.net.forward(&self.mesh, &xt, Some(&cond))?;

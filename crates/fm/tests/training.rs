@@ -208,6 +208,55 @@ fn interrupted_and_resumed_runs_equal_the_uninterrupted_run() {
 }
 
 #[test]
+fn augmented_position_runs_resume_bit_for_bit_and_differ_from_plain_ones() {
+    let mesh = procedural::icosphere(1);
+    let signals = smooth_signals(&mesh, 4, 3);
+    let mut cfg = tiny_config(8);
+    cfg.model.condition_on_xyz = true;
+    cfg.train.augment.scale = 0.2;
+    cfg.train.augment.shift = 0.1;
+
+    let full = tempfile::tempdir().unwrap();
+    Trainer::new(full.path(), cfg.clone(), &mesh, signals.clone())
+        .unwrap()
+        .run(&no_stop(), false)
+        .unwrap();
+    let stopped = tempfile::tempdir().unwrap();
+    Trainer::new(stopped.path(), cfg.clone(), &mesh, signals.clone())
+        .unwrap()
+        .run_until(3, &no_stop(), false)
+        .unwrap();
+    Trainer::resume(stopped.path(), &mesh, signals.clone())
+        .unwrap()
+        .run(&no_stop(), false)
+        .unwrap();
+    assert_bit_identical(
+        &full.path().join(WEIGHTS_FILE),
+        &stopped.path().join(WEIGHTS_FILE),
+    );
+
+    // the augmentation is really applied: without it the weights differ
+    let mut plain = cfg.clone();
+    plain.train.augment = Default::default();
+    let d = tempfile::tempdir().unwrap();
+    Trainer::new(d.path(), plain, &mesh, signals)
+        .unwrap()
+        .run(&no_stop(), false)
+        .unwrap();
+    let (a, b) = (
+        weights(&full.path().join(WEIGHTS_FILE)),
+        weights(&d.path().join(WEIGHTS_FILE)),
+    );
+    assert!(a.iter().any(|(k, t)| !t.equal(&b[k])));
+
+    // scalar signals cannot be augmented as positions
+    let scalar = smooth_signals(&mesh, 4, 1);
+    let d = tempfile::tempdir().unwrap();
+    let err = Trainer::new(d.path(), cfg, &mesh, scalar).unwrap_err();
+    assert!(err.to_string().contains("train.augment"), "{err}");
+}
+
+#[test]
 fn damaged_checkpoints_are_named_and_skipped() {
     let mesh = procedural::icosphere(1);
     let signals = smooth_signals(&mesh, 3, 1);
@@ -301,6 +350,10 @@ fn config_files_are_strict_and_defaults_roundtrip() {
         msg.contains("train.batch") && msg.contains("run.toml"),
         "{msg}"
     );
+
+    std::fs::write(&path, "[train.augment]\nscale = 1.5\n").unwrap();
+    let msg = RunConfig::from_toml_file(&path).unwrap_err().to_string();
+    assert!(msg.contains("train.augment.scale"), "{msg}");
 
     std::fs::write(&path, "[noise]\nkind = \"matern:-1\"\n").unwrap();
     let msg = RunConfig::from_toml_file(&path).unwrap_err().to_string();

@@ -1,0 +1,74 @@
+//! `mfm remesh`: other triangulations of a mesh's surface, for sampling a
+//! trained model across resolutions and on damaged inputs.
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use mfm_deform::DeformSpace;
+use mfm_fm::deformations::{Damage, damaged_mesh};
+use mfm_geometry::subdivide;
+use std::path::PathBuf;
+
+use crate::mesh_arg::load_mesh;
+
+/// Arguments of `mfm remesh`.
+#[derive(Args)]
+pub struct RemeshArgs {
+    /// Mesh file or builtin:NAME.
+    mesh: String,
+    /// Output mesh (.ply or .obj).
+    #[arg(long)]
+    out: PathBuf,
+    /// Rounds of midpoint subdivision (each multiplies the faces by 4 and
+    /// keeps the surface).
+    #[arg(long, default_value_t = 0)]
+    subdivide: u32,
+    /// Damage the mesh: small-holes, medium-holes, large-holes, partial,
+    /// mild-flips, severe-flips (needs --space).
+    #[arg(long, requires = "space")]
+    damage: Option<String>,
+    /// space.json of `mfm dataset deform`: damage keeps its handle regions
+    /// intact (and the partial cut uses its up axis).
+    #[arg(long)]
+    space: Option<PathBuf>,
+    /// Seed of the random hole centres and flips.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+/// Runs `mfm remesh`.
+pub fn run(a: RemeshArgs) -> Result<()> {
+    if a.subdivide > 6 {
+        bail!(
+            "--subdivide {}: at most 6 rounds (4096x the faces)",
+            a.subdivide
+        );
+    }
+    let mut mesh = load_mesh(&a.mesh)?;
+    let input = (mesh.num_vertices(), mesh.num_faces());
+    for _ in 0..a.subdivide {
+        mesh = subdivide::midpoint(&mesh)?;
+    }
+    if let Some(name) = &a.damage {
+        let damage: Damage = name.parse()?;
+        let path = a.space.as_ref().context("--damage needs --space")?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        let space: DeformSpace = serde_json::from_str(&text).with_context(|| {
+            format!(
+                "{}: not a deformation space (space.json of mfm dataset deform)",
+                path.display()
+            )
+        })?;
+        mesh = damaged_mesh(&mesh, &space, damage, a.seed)?;
+    }
+    crate::commands::write_mesh(&mesh, &a.out)?;
+    println!(
+        "{}: {} vertices, {} faces (from {} vertices, {} faces)",
+        a.out.display(),
+        mesh.num_vertices(),
+        mesh.num_faces(),
+        input.0,
+        input.1
+    );
+    Ok(())
+}

@@ -1,0 +1,475 @@
+//! Deformation datasets and their plausibility metric (DESIGN.md sections
+//! 7-8; the paper's reposing and elastic-deformation experiments at CPU
+//! scale).
+//!
+//! The paper's deformation data (SMPL poses, IPC simulations) is not
+//! available here, so shapes come from a *known* parametric space instead:
+//! [`mfm_deform::DeformSpace`], as-rigid-as-possible deformations driven by
+//! random rigid motions of a few handle regions (feet, trunk, tail...) with a
+//! fixed anchor (the torso). A shape is stored as a 3-channel signal (its
+//! vertex positions) over the rest mesh, aligned to the rest shape (centered,
+//! rotation about the up axis removed).
+//!
+//! Meshes ([`DeformMeshes`]): the user's mesh is normalized (area centroid at
+//! the origin, unit bounding-box diagonal) into `original`; `coarse` is its
+//! decimation (the training mesh, as in the paper where the simulation mesh
+//! is much coarser than the surface); `eval` is `coarse` with its `x <
+//! centroid` half refined twice (a finer, non-uniform triangulation of the
+//! same surface, as in the GMM experiment). Handles live in ambient space, so
+//! one [`mfm_deform::HandleSet`] selects corresponding regions on all of them
+//! and the same parameters give the same pose at every resolution.
+//!
+//! Plausibility ([`plausibility`]): each generated shape is projected onto
+//! the space (handle transforms fitted by Kabsch, then the ARAP solve, see
+//! [`mfm_deform::project`]) and the mass-weighted mean squared distance to
+//! the projection is reported: our stand-in for the paper's SMPL-regression
+//! MSE (0 for a shape the space can produce).
+
+use std::ops::Range;
+use std::path::Path;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use mfm_deform::{Arap, DeformParams, DeformSpace, HandleSet, normalize_rest, project};
+use mfm_geometry::TriMesh;
+use mfm_geometry::decimate::decimate;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::dataset::{Dataset, Manifest};
+use crate::error::{FmError, Result};
+use crate::experiment::{GmmMeshes, HalfDensity};
+use crate::signals::{InMemorySignals, SignalSource};
+
+/// The generator name recorded in the manifest of a deformation dataset.
+pub const GENERATOR: &str = "deform";
+
+/// File beside `signals.npy` holding every sample's [`DeformParams`] (a JSON
+/// array in sample order).
+pub const PARAMS_FILE: &str = "params.json";
+
+/// The meshes of a deformation experiment; see the [module docs](self).
+#[derive(Clone, Debug)]
+pub struct DeformMeshes {
+    /// The user's mesh, normalized (area centroid at the origin, unit
+    /// bounding-box diagonal).
+    pub original: TriMesh,
+    /// The decimated training mesh (or `original` when it is already small).
+    pub coarse: TriMesh,
+    /// `coarse` with its `x < centroid` half refined twice: finer and
+    /// non-uniform, the same surface as `coarse`.
+    pub eval: TriMesh,
+    /// The normalization applied to the user's mesh: `original = scale *
+    /// (input - shift)`... as returned by [`normalize_rest`].
+    pub normalization: Normalization,
+}
+
+/// The similarity that took the user's mesh to [`DeformMeshes::original`]
+/// (the values [`normalize_rest`] returns).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Normalization {
+    /// Scale factor.
+    pub scale: f64,
+    /// Shift, as returned by [`normalize_rest`].
+    pub shift: [f64; 3],
+}
+
+impl DeformMeshes {
+    /// Normalizes `mesh`, decimates it to at most `coarse_faces` faces (kept
+    /// as is when it has fewer) and builds the evaluation mesh.
+    ///
+    /// Cost: `O(F log F)`.
+    ///
+    /// # Errors
+    /// [`FmError::Config`] for `coarse_faces < 100`;
+    /// [`FmError::MeshProcessing`] when normalization, decimation or
+    /// refinement fails (e.g. a non-manifold mesh).
+    pub fn from_mesh(mesh: &TriMesh, coarse_faces: usize) -> Result<Self> {
+        if coarse_faces < 100 {
+            return Err(FmError::Config(format!(
+                "the coarse mesh needs at least 100 faces, asked for {coarse_faces}"
+            )));
+        }
+        let (original, scale, shift) =
+            normalize_rest(mesh).map_err(|e| mesh_error("normalizing the mesh", e))?;
+        let coarse = if original.num_faces() > coarse_faces {
+            decimate(&original, coarse_faces, None)
+                .map_err(|e| mesh_error("decimating the mesh to the training resolution", e))?
+                .mesh
+        } else {
+            original.clone()
+        };
+        let eval = GmmMeshes::from_base(coarse.clone(), HalfDensity::default())?.test;
+        Ok(Self {
+            original,
+            coarse,
+            eval,
+            normalization: Normalization { scale, shift },
+        })
+    }
+}
+
+fn mesh_error(what: &str, e: impl std::error::Error + Send + Sync + 'static) -> FmError {
+    FmError::MeshProcessing {
+        what: what.into(),
+        source: Box::new(e),
+    }
+}
+
+/// What a deformation dataset's manifest records (`generator_params`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DeformManifest {
+    /// The deformation space (handles, ranges, ARAP options, up axis).
+    pub space: DeformSpace,
+    /// Which samples of the seed's sequence the dataset holds.
+    pub first: usize,
+    /// The normalization of the source mesh.
+    pub normalization: Normalization,
+    /// What the mesh is (`coarse`, `eval`, `original`...).
+    pub mesh_role: String,
+}
+
+impl DeformManifest {
+    /// Reads the deformation parameters of a dataset (`None` when another
+    /// generator made it).
+    ///
+    /// # Errors
+    /// [`FmError::Format`] naming the manifest when `generator_params` do
+    /// not parse.
+    pub fn of(dataset: &Dataset) -> Result<Option<Self>> {
+        let m = dataset.manifest();
+        if m.generator != GENERATOR {
+            return Ok(None);
+        }
+        serde_json::from_value(m.generator_params.clone())
+            .map(Some)
+            .map_err(|e| {
+                FmError::format(
+                    dataset.dir().join("manifest.json"),
+                    format!("generator_params of a deform dataset: {e}"),
+                )
+            })
+    }
+}
+
+/// Generates samples `range` of `seed` on `mesh` and writes them as a
+/// dataset folder `dir` (mesh, `signals.npy` `[N, V, 3]` f32, manifest) plus
+/// [`PARAMS_FILE`]. Shows a progress bar when `progress` is set.
+///
+/// Cost: one ARAP factorization of `mesh`, then per sample a few tens of
+/// 3-column solves and local SVD steps (parallel over samples).
+///
+/// # Errors
+/// [`FmError::Deform`] (empty handle region on this mesh, ...), and the
+/// errors of [`Dataset::write`].
+#[allow(clippy::too_many_arguments)]
+pub fn write_dataset(
+    dir: &Path,
+    mesh: &TriMesh,
+    space: &DeformSpace,
+    seed: u64,
+    range: Range<usize>,
+    normalization: Normalization,
+    mesh_role: &str,
+    provenance: &str,
+    progress: bool,
+) -> Result<Dataset> {
+    let n = range.len();
+    if n == 0 {
+        return Err(FmError::Config(
+            "a deformation dataset needs at least 1 sample".into(),
+        ));
+    }
+    let bar = if progress {
+        let bar = ProgressBar::new(n as u64);
+        bar.set_style(
+            ProgressStyle::with_template("{prefix} [{bar:30}] {pos}/{len} shapes ({eta} left)")
+                .unwrap_or_else(|_| ProgressStyle::default_bar())
+                .progress_chars("=> "),
+        );
+        bar.set_prefix(format!("ARAP on {} vertices", mesh.num_vertices()));
+        bar
+    } else {
+        ProgressBar::hidden()
+    };
+    let first = range.start;
+    let shapes = space.generate(mesh, seed, range, |_| bar.inc(1))?;
+    bar.finish_and_clear();
+    let v = mesh.num_vertices();
+    let data: Vec<f32> = shapes
+        .iter()
+        .flat_map(|s| s.positions.iter().flat_map(|p| p.map(|x| x as f32)))
+        .collect();
+    let signals = InMemorySignals::new(data, n, v, 3)?;
+    let params = DeformManifest {
+        space: space.clone(),
+        first,
+        normalization,
+        mesh_role: mesh_role.into(),
+    };
+    let manifest = Manifest::new(
+        GENERATOR,
+        serde_json::to_value(&params).map_err(|e| FmError::Config(e.to_string()))?,
+    )
+    .with_seed(seed)
+    .with_provenance(provenance);
+    let dataset = Dataset::write(dir, mesh, &signals, manifest)?;
+    let all: Vec<&DeformParams> = shapes.iter().map(|s| &s.params).collect();
+    let path = dataset.dir().join(PARAMS_FILE);
+    let text = serde_json::to_string(&all).map_err(|e| FmError::Config(e.to_string()))?;
+    std::fs::write(&path, text).map_err(|e| FmError::io(&path, e))?;
+    Ok(dataset)
+}
+
+/// Picks the handles of a new deformation space on `original` (see
+/// [`HandleSet::auto`]) and returns the space with the given ranges.
+///
+/// # Errors
+/// [`FmError::Deform`] when the handles cannot be placed.
+pub fn space_for(
+    original: &TriMesh,
+    handles: usize,
+    radius: f64,
+    max_angle: f64,
+    max_shift: f64,
+) -> Result<DeformSpace> {
+    let set = HandleSet::auto(original, handles, radius)?;
+    let mut space = DeformSpace::new(original, set);
+    space.max_angle = max_angle;
+    space.max_shift = max_shift;
+    space.validate()?;
+    Ok(space)
+}
+
+/// Projection errors of a set of shapes; see [`plausibility`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Plausibility {
+    /// Mass-weighted mean squared distance of each shape to its projection
+    /// onto the deformation space (squared units of the normalized mesh,
+    /// whose bounding-box diagonal is 1).
+    pub mse: Vec<f64>,
+    /// Mean of `mse`.
+    pub mean: f64,
+    /// Median of `mse`.
+    pub median: f64,
+    /// The projections of the first `keep` shapes (see [`plausibility`]).
+    #[serde(skip)]
+    pub projections: Vec<Vec<[f64; 3]>>,
+}
+
+/// Projects every signal of `shapes` (3 channels: positions on `mesh`) onto
+/// `space` and reports the projection errors, keeping the projected
+/// positions of the first `keep` shapes (for pictures). `mesh` may be any
+/// triangulation of the surface the space was made for (the handles select
+/// its regions by position).
+///
+/// Cost: one ARAP factorization of `mesh`, then per shape one Kabsch fit per
+/// handle and one ARAP solve (parallel over shapes).
+///
+/// # Errors
+/// [`FmError::SizeMismatch`] when the shapes are not 3-channel signals on
+/// `mesh`; [`FmError::Deform`] (a handle region is empty on `mesh`, the ARAP
+/// solve failed).
+pub fn plausibility(
+    space: &DeformSpace,
+    mesh: &TriMesh,
+    shapes: &InMemorySignals,
+    keep: usize,
+) -> Result<Plausibility> {
+    if shapes.channels() != 3 || shapes.num_vertices() != mesh.num_vertices() {
+        return Err(FmError::SizeMismatch {
+            what: "shapes for the plausibility metric (vertices x channels)".into(),
+            expected: mesh.num_vertices() * 3,
+            found: shapes.num_vertices() * shapes.channels(),
+        });
+    }
+    let arap = Arap::new(mesh, &space.handles)?;
+    let results = (0..shapes.len())
+        .into_par_iter()
+        .map(|i| {
+            let positions: Vec<[f64; 3]> = shapes
+                .signal(i)
+                .chunks_exact(3)
+                .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
+                .collect();
+            let p = project(&arap, space, &positions)?;
+            Ok((p.mse, (i < keep).then_some(p.positions)))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let (mse, kept): (Vec<f64>, Vec<_>) = results.into_iter().unzip();
+    let projections = kept.into_iter().flatten().collect();
+    let mean = mse.iter().sum::<f64>() / mse.len().max(1) as f64;
+    let mut sorted = mse.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = match sorted.len() {
+        0 => f64::NAN,
+        n if n % 2 == 1 => sorted[n / 2],
+        n => 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]),
+    };
+    Ok(Plausibility {
+        mse,
+        mean,
+        median,
+        projections,
+    })
+}
+
+/// A damaged source mesh for the robustness table (the paper's holes,
+/// partial meshes and edge flips); see [`damaged_mesh`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Damage {
+    /// Three holes of radius 2% of the bounding-box diagonal.
+    SmallHoles,
+    /// Three holes of radius 4% of the diagonal.
+    MediumHoles,
+    /// Three holes of radius 7% of the diagonal.
+    LargeHoles,
+    /// The top fifth of the surface (along the space's up axis) cut away, handle
+    /// regions kept: an open, partial scan.
+    Partial,
+    /// 10% of the interior edges flipped.
+    MildFlips,
+    /// 50% of the interior edges flipped.
+    SevereFlips,
+}
+
+impl Damage {
+    /// Every damage, in table order.
+    pub const ALL: [Damage; 6] = [
+        Damage::SmallHoles,
+        Damage::MediumHoles,
+        Damage::LargeHoles,
+        Damage::Partial,
+        Damage::MildFlips,
+        Damage::SevereFlips,
+    ];
+
+    /// The kebab-case name (`small-holes`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            Damage::SmallHoles => "small-holes",
+            Damage::MediumHoles => "medium-holes",
+            Damage::LargeHoles => "large-holes",
+            Damage::Partial => "partial",
+            Damage::MildFlips => "mild-flips",
+            Damage::SevereFlips => "severe-flips",
+        }
+    }
+}
+
+impl std::str::FromStr for Damage {
+    type Err = FmError;
+    fn from_str(s: &str) -> Result<Self> {
+        Damage::ALL
+            .into_iter()
+            .find(|d| d.name() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Damage::ALL.iter().map(|d| d.name()).collect();
+                FmError::Config(format!(
+                    "unknown damage {s:?}; expected one of {}",
+                    names.join(", ")
+                ))
+            })
+    }
+}
+
+/// `mesh` damaged as `damage` says, keeping every handle region of the
+/// space's handles intact (hole centres are drawn among vertices farther than the hole
+/// radius plus the handle radius from every handle centre; the partial cut
+/// keeps faces touching a handle region) so that the projection metric stays
+/// defined. Holes are geodesic (edge-path) discs; the largest connected
+/// component is kept. Deterministic in `seed`.
+///
+/// # Errors
+/// [`FmError::Config`] when no vertex is far enough from the handles for a
+/// hole; [`FmError::MeshProcessing`] when punching fails.
+pub fn damaged_mesh(
+    mesh: &TriMesh,
+    space: &DeformSpace,
+    damage: Damage,
+    seed: u64,
+) -> Result<TriMesh> {
+    let handles = &space.handles;
+    use mfm_geometry::flips::{FlipAmount, random_edge_flips};
+    use mfm_geometry::holes::{HoleMetric, largest_component, punch_holes};
+    use rand::{Rng, SeedableRng};
+    let diag = mesh.bounding_box_diagonal();
+    let hole_radius = match damage {
+        Damage::SmallHoles => 0.02,
+        Damage::MediumHoles => 0.04,
+        Damage::LargeHoles => 0.07,
+        Damage::MildFlips => {
+            return Ok(random_edge_flips(mesh, FlipAmount::Fraction(0.1), seed).mesh);
+        }
+        Damage::SevereFlips => {
+            return Ok(random_edge_flips(mesh, FlipAmount::Fraction(0.5), seed).mesh);
+        }
+        Damage::Partial => return partial_mesh(mesh, handles, space.up),
+    } * diag;
+    let far: Vec<usize> = mesh
+        .positions()
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| {
+            handles.iter().all(|h| {
+                let d = mfm_geometry::mesh::norm(mfm_geometry::mesh::sub(**p, h.center));
+                d > h.radius + 1.5 * hole_radius
+            })
+        })
+        .map(|(i, _)| i)
+        .collect();
+    if far.len() < 3 {
+        return Err(FmError::Config(format!(
+            "no room for {} holes away from the handles",
+            damage.name()
+        )));
+    }
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let centers: Vec<usize> = (0..3)
+        .map(|_| far[rng.random_range(0..far.len())])
+        .collect();
+    let punched = punch_holes(mesh, &centers, hole_radius, HoleMetric::Geodesic)
+        .map_err(|e| mesh_error("punching holes", e))?;
+    Ok(largest_component(&punched.mesh))
+}
+
+/// The top fifth (along the axis `up`) of `mesh` cut away, except faces
+/// touching a handle region; the largest component is kept.
+fn partial_mesh(mesh: &TriMesh, handles: &HandleSet, up: usize) -> Result<TriMesh> {
+    use mfm_geometry::holes::largest_component;
+    let p = mesh.positions();
+    let mut heights: Vec<f64> = p.iter().map(|x| x[up]).collect();
+    heights.sort_by(f64::total_cmp);
+    let cut = heights[(heights.len() * 4) / 5];
+    let in_handle: Vec<bool> = p
+        .iter()
+        .map(|x| handles.iter().any(|h| h.contains(*x)))
+        .collect();
+    let faces: Vec<[u32; 3]> = mesh
+        .faces()
+        .iter()
+        .copied()
+        .filter(|f| {
+            let top = f.iter().all(|&v| p[v as usize][up] > cut);
+            !top || f.iter().any(|&v| in_handle[v as usize])
+        })
+        .collect();
+    // drop the vertices no face uses
+    let mut map = vec![u32::MAX; p.len()];
+    let mut positions = Vec::new();
+    let faces: Vec<[u32; 3]> = faces
+        .into_iter()
+        .map(|f| {
+            f.map(|v| {
+                if map[v as usize] == u32::MAX {
+                    map[v as usize] = positions.len() as u32;
+                    positions.push(p[v as usize]);
+                }
+                map[v as usize]
+            })
+        })
+        .collect();
+    let cut_mesh =
+        TriMesh::new(positions, faces).map_err(|e| mesh_error("cutting a partial mesh", e))?;
+    Ok(largest_component(&cut_mesh))
+}

@@ -1,0 +1,107 @@
+//! Deformation datasets: files and manifest round trip, the plausibility
+//! metric separates dataset shapes from perturbed ones, damaged meshes keep
+//! the handle regions.
+#![allow(clippy::unwrap_used)]
+
+use mfm_fm::dataset::Dataset;
+use mfm_fm::deformations::{
+    self, Damage, DeformManifest, DeformMeshes, PARAMS_FILE, damaged_mesh, plausibility,
+};
+use mfm_fm::{InMemorySignals, SignalSource};
+use mfm_geometry::procedural;
+
+fn meshes() -> DeformMeshes {
+    let capsule = procedural::capsule(0.5, 0.75, 16, 48).unwrap();
+    DeformMeshes::from_mesh(&capsule, 600).unwrap()
+}
+
+#[test]
+fn meshes_are_normalized_coarse_and_finer() {
+    let m = meshes();
+    assert!((m.original.bounding_box_diagonal() - 1.0).abs() < 1e-9);
+    assert!(m.coarse.num_faces() <= 600 && m.coarse.num_faces() >= 590);
+    assert!(m.eval.num_vertices() > 2 * m.coarse.num_vertices());
+    // refinement keeps the coarse surface: same area
+    assert!((m.eval.total_area() - m.coarse.total_area()).abs() < 1e-9);
+    let err = DeformMeshes::from_mesh(&m.original, 10).unwrap_err();
+    assert!(err.to_string().contains("100 faces"), "{err}");
+}
+
+#[test]
+fn written_datasets_record_the_space_and_project_onto_it() {
+    let m = meshes();
+    let space = deformations::space_for(&m.original, 2, 0.15, 0.4, 0.08).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let data = deformations::write_dataset(
+        &dir.path().join("d"),
+        &m.coarse,
+        &space,
+        7,
+        3..7,
+        m.normalization,
+        "coarse",
+        "test",
+        false,
+    )
+    .unwrap();
+    let opened = Dataset::open(data.dir()).unwrap();
+    let manifest = DeformManifest::of(&opened).unwrap().unwrap();
+    assert_eq!(manifest.space, space);
+    assert_eq!((manifest.first, manifest.mesh_role.as_str()), (3, "coarse"));
+    let params: Vec<mfm_deform::DeformParams> =
+        serde_json::from_str(&std::fs::read_to_string(data.dir().join(PARAMS_FILE)).unwrap())
+            .unwrap();
+    assert_eq!(params.len(), 4);
+    assert_eq!(params[0], space.sample_params(7, 3));
+
+    // dataset shapes lie in the space; a smooth perturbation does not
+    let shapes = opened.load_all().unwrap();
+    let p = plausibility(&space, &m.coarse, &shapes, 1).unwrap();
+    assert_eq!((p.mse.len(), p.projections.len()), (4, 1));
+    let mut bent = shapes.data().to_vec();
+    for (k, x) in bent.iter_mut().enumerate() {
+        let v = (k / 3) as f32;
+        *x += 0.01 * (0.37 * v).sin();
+    }
+    let bent = InMemorySignals::new(bent, 4, shapes.num_vertices(), 3).unwrap();
+    let q = plausibility(&space, &m.coarse, &bent, 0).unwrap();
+    assert!(p.mean < 1e-8, "dataset shapes project with {:e}", p.mean);
+    assert!(
+        q.mean > 100.0 * p.mean.max(1e-10),
+        "{:e} vs {:e}",
+        q.mean,
+        p.mean
+    );
+    // wrong channel count is an error
+    let scalar = InMemorySignals::new(
+        vec![0.0; m.coarse.num_vertices()],
+        1,
+        m.coarse.num_vertices(),
+        1,
+    )
+    .unwrap();
+    assert!(plausibility(&space, &m.coarse, &scalar, 0).is_err());
+}
+
+#[test]
+fn damaged_meshes_keep_every_handle_region() {
+    let m = meshes();
+    let space = deformations::space_for(&m.original, 2, 0.15, 0.4, 0.08).unwrap();
+    for damage in Damage::ALL {
+        let d = damaged_mesh(&m.eval, &space, damage, 3).unwrap();
+        let regions = space.handles.regions(&d).unwrap();
+        assert!(regions.iter().all(|r| !r.is_empty()), "{damage:?}");
+        match damage {
+            Damage::MildFlips | Damage::SevereFlips => {
+                assert_eq!(d.num_vertices(), m.eval.num_vertices());
+                assert_ne!(d.faces(), m.eval.faces(), "{damage:?}");
+            }
+            _ => assert!(d.num_faces() < m.eval.num_faces(), "{damage:?}"),
+        }
+        assert_eq!(damage.name().parse::<Damage>().unwrap(), damage);
+    }
+    assert!("dents".parse::<Damage>().is_err());
+    // larger holes remove more
+    let faces = |d| damaged_mesh(&m.eval, &space, d, 3).unwrap().num_faces();
+    assert!(faces(Damage::LargeHoles) < faces(Damage::SmallHoles));
+}

@@ -1,0 +1,155 @@
+//! The flow-matching steps the figure commands run through the release
+//! `mfm` binary (train, sample, eval), and the folder and mesh choices they
+//! share.
+
+use anyhow::{Context, Result};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// `p` as a command-line argument.
+pub fn arg(p: &Path) -> String {
+    p.to_string_lossy().into_owned()
+}
+
+/// `path` if absolute, else relative to the workspace root.
+pub fn out_dir(path: &Path) -> PathBuf {
+    if path.is_absolute() {
+        path.to_path_buf()
+    } else {
+        crate::root().join(path)
+    }
+}
+
+/// Removes a previous `dir` and creates it empty.
+pub fn fresh_dir(dir: &Path) -> Result<()> {
+    if dir.exists() {
+        std::fs::remove_dir_all(dir)
+            .with_context(|| format!("cannot remove the previous {}", dir.display()))?;
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))
+}
+
+/// `mesh` when given; else `../shared/meshes/NAME` when present, else
+/// `fallback` (saying so).
+pub fn mesh_or_shared(mesh: Option<&str>, name: &str, fallback: &str) -> String {
+    if let Some(m) = mesh {
+        return m.to_owned();
+    }
+    let shared = crate::root().join("../shared/meshes").join(name);
+    if shared.is_file() {
+        arg(&shared)
+    } else {
+        println!("../shared/meshes/{name} not found: using {fallback}");
+        fallback.to_owned()
+    }
+}
+
+/// A noise kind as a file-name tag (`matern:100` -> `matern_100`).
+pub fn tag(kind: &str) -> String {
+    kind.chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect()
+}
+
+/// Reads a JSON file.
+pub fn read_json(path: &Path) -> Result<Value> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    serde_json::from_str(&text).with_context(|| format!("{}: invalid JSON", path.display()))
+}
+
+/// The release `mfm` binary, with its output shown live.
+pub struct Mfm<'a> {
+    /// Path of the binary.
+    pub exe: &'a Path,
+}
+
+impl Mfm<'_> {
+    /// Runs `mfm ARGS`, echoing the command line.
+    pub fn run(&self, args: &[&str]) -> Result<()> {
+        println!("$ mfm {}", args.join(" "));
+        crate::demo::mfm_live(self.exe, args)
+    }
+
+    /// `mfm train --preset PRESET --dataset D --out RUN --steps S --seed
+    /// SEED --noise KIND --quiet`; returns the wall seconds.
+    #[allow(clippy::too_many_arguments)]
+    pub fn train(
+        &self,
+        preset: &str,
+        dataset: &Path,
+        run: &Path,
+        steps: u64,
+        seed: u64,
+        noise: &str,
+    ) -> Result<f64> {
+        let t = Instant::now();
+        self.run(&[
+            "train",
+            "--preset",
+            preset,
+            "--dataset",
+            &arg(dataset),
+            "--out",
+            &arg(run),
+            "--steps",
+            &steps.to_string(),
+            "--seed",
+            &seed.to_string(),
+            "--noise",
+            noise,
+            "--quiet",
+        ])?;
+        Ok(t.elapsed().as_secs_f64())
+    }
+
+    /// `mfm sample --run RUN --mesh MESH --n N --seed SEED --out OUT
+    /// [EXTRA...]`; returns the wall seconds.
+    pub fn sample(
+        &self,
+        run: &Path,
+        mesh: &Path,
+        n: usize,
+        seed: u64,
+        out: &Path,
+        extra: &[&str],
+    ) -> Result<f64> {
+        let t = Instant::now();
+        let (run, mesh, n, seed, out) = (
+            arg(run),
+            arg(mesh),
+            n.to_string(),
+            seed.to_string(),
+            arg(out),
+        );
+        let mut args = vec![
+            "sample", "--run", &run, "--mesh", &mesh, "--n", &n, "--seed", &seed, "--out", &out,
+        ];
+        args.extend_from_slice(extra);
+        self.run(&args)?;
+        Ok(t.elapsed().as_secs_f64())
+    }
+
+    /// `mfm eval --samples SAMPLES AGAINST... --out OUT [--png PNG]`, where
+    /// `against` is `["--reference", DIR]` or `["--space", S, "--mesh", M]`;
+    /// returns the metrics JSON.
+    pub fn eval(
+        &self,
+        samples: &Path,
+        against: &[&str],
+        out: &Path,
+        png: Option<&Path>,
+    ) -> Result<Value> {
+        let (samples, out_arg) = (arg(samples), arg(out));
+        let mut args = vec!["eval", "--samples", &samples];
+        args.extend_from_slice(against);
+        args.extend_from_slice(&["--out", &out_arg]);
+        let png = png.map(arg);
+        if let Some(p) = &png {
+            args.extend_from_slice(&["--png", p]);
+        }
+        self.run(&args)?;
+        read_json(out)
+    }
+}
