@@ -27,7 +27,7 @@ pub struct RemeshArgs {
     #[arg(long, requires = "space")]
     damage: Option<String>,
     /// space.json of `mfm dataset deform`: damage keeps its handle regions
-    /// intact (and the partial cut uses its up axis).
+    /// intact.
     #[arg(long)]
     space: Option<PathBuf>,
     /// Seed of the random hole centres and flips.

@@ -58,8 +58,8 @@ pub struct DeformMeshes {
     /// `coarse` with its `x < centroid` half refined twice: finer and
     /// non-uniform, the same surface as `coarse`.
     pub eval: TriMesh,
-    /// The normalization applied to the user's mesh: `original = scale *
-    /// (input - shift)`... as returned by [`normalize_rest`].
+    /// The map `p -> scale * p + shift` that took the user's mesh to
+    /// `original` (from [`normalize_rest`]).
     pub normalization: Normalization,
 }
 
@@ -67,9 +67,9 @@ pub struct DeformMeshes {
 /// (the values [`normalize_rest`] returns).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Normalization {
-    /// Scale factor.
+    /// Scale factor (applied first).
     pub scale: f64,
-    /// Shift, as returned by [`normalize_rest`].
+    /// Shift added after scaling.
     pub shift: [f64; 3],
 }
 
@@ -324,8 +324,8 @@ pub enum Damage {
     MediumHoles,
     /// Three holes of radius 7% of the diagonal.
     LargeHoles,
-    /// The top fifth of the surface (along the space's up axis) cut away, handle
-    /// regions kept: an open, partial scan.
+    /// One large patch (radius up to 20% of the diagonal) missing where the
+    /// surface is farthest from every handle: an open, partial scan.
     Partial,
     /// 10% of the interior edges flipped.
     MildFlips,
@@ -375,9 +375,9 @@ impl std::str::FromStr for Damage {
 
 /// `mesh` damaged as `damage` says, keeping every handle region of the
 /// space's handles intact (hole centres are drawn among vertices farther than the hole
-/// radius plus the handle radius from every handle centre; the partial cut
-/// keeps faces touching a handle region) so that the projection metric stays
-/// defined. Holes are geodesic (edge-path) discs; the largest connected
+/// radius plus the handle radius from every handle centre; the partial
+/// patch stops short of every handle region) so that the projection metric
+/// stays defined. Holes are geodesic (edge-path) discs; the largest connected
 /// component is kept. Deterministic in `seed`.
 ///
 /// # Errors
@@ -404,7 +404,7 @@ pub fn damaged_mesh(
         Damage::SevereFlips => {
             return Ok(random_edge_flips(mesh, FlipAmount::Fraction(0.5), seed).mesh);
         }
-        Damage::Partial => return partial_mesh(mesh, handles, space.up),
+        Damage::Partial => return partial_mesh(mesh, handles),
     } * diag;
     let far: Vec<usize> = mesh
         .positions()
@@ -433,43 +433,33 @@ pub fn damaged_mesh(
     Ok(largest_component(&punched.mesh))
 }
 
-/// The top fifth (along the axis `up`) of `mesh` cut away, except faces
-/// touching a handle region; the largest component is kept.
-fn partial_mesh(mesh: &TriMesh, handles: &HandleSet, up: usize) -> Result<TriMesh> {
-    use mfm_geometry::holes::largest_component;
-    let p = mesh.positions();
-    let mut heights: Vec<f64> = p.iter().map(|x| x[up]).collect();
-    heights.sort_by(f64::total_cmp);
-    let cut = heights[(heights.len() * 4) / 5];
-    let in_handle: Vec<bool> = p
+/// One large missing patch, like a scan that never saw part of the
+/// surface: a geodesic disc around the vertex farthest from every handle
+/// centre, of radius 20% of the diagonal, or less so that it stops short of
+/// every handle region; the largest component is kept.
+fn partial_mesh(mesh: &TriMesh, handles: &HandleSet) -> Result<TriMesh> {
+    use mfm_geometry::holes::{HoleMetric, largest_component, punch_holes};
+    use mfm_geometry::mesh::{norm, sub};
+    let clearance = |p: [f64; 3]| {
+        handles
+            .iter()
+            .map(|h| norm(sub(p, h.center)) - h.radius)
+            .fold(f64::INFINITY, f64::min)
+    };
+    let (center, room) = mesh
+        .positions()
         .iter()
-        .map(|x| handles.iter().any(|h| h.contains(*x)))
-        .collect();
-    let faces: Vec<[u32; 3]> = mesh
-        .faces()
-        .iter()
-        .copied()
-        .filter(|f| {
-            let top = f.iter().all(|&v| p[v as usize][up] > cut);
-            !top || f.iter().any(|&v| in_handle[v as usize])
-        })
-        .collect();
-    // drop the vertices no face uses
-    let mut map = vec![u32::MAX; p.len()];
-    let mut positions = Vec::new();
-    let faces: Vec<[u32; 3]> = faces
-        .into_iter()
-        .map(|f| {
-            f.map(|v| {
-                if map[v as usize] == u32::MAX {
-                    map[v as usize] = positions.len() as u32;
-                    positions.push(p[v as usize]);
-                }
-                map[v as usize]
-            })
-        })
-        .collect();
-    let cut_mesh =
-        TriMesh::new(positions, faces).map_err(|e| mesh_error("cutting a partial mesh", e))?;
-    Ok(largest_component(&cut_mesh))
+        .enumerate()
+        .map(|(i, &p)| (i, clearance(p)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .ok_or_else(|| FmError::Config("a partial mesh of an empty mesh".into()))?;
+    let radius = (0.2 * mesh.bounding_box_diagonal()).min(0.8 * room);
+    if radius <= 0.0 {
+        return Err(FmError::Config(
+            "no room for a missing patch away from the handles".into(),
+        ));
+    }
+    let punched = punch_holes(mesh, &[center], radius, HoleMetric::Geodesic)
+        .map_err(|e| mesh_error("cutting a partial mesh", e))?;
+    Ok(largest_component(&punched.mesh))
 }
