@@ -127,22 +127,12 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
             writeln!(csv, "{kind},,,,,{tr:.1},{sa:.2}")?;
             continue;
         }
+        let [err, mmd, cov, nna] = ["test_error", "mmd", "cov", "one_nna"].map(|k| f(m, k));
         writeln!(
             md,
-            "| {kind} | {:.4} | {:.4} | {:.3} | {:.3} | {tr:.0} | {sa:.1} |",
-            f(m, "test_error"),
-            f(m, "mmd"),
-            f(m, "cov"),
-            f(m, "one_nna")
+            "| {kind} | {err:.4} | {mmd:.4} | {cov:.3} | {nna:.3} | {tr:.0} | {sa:.1} |"
         )?;
-        writeln!(
-            csv,
-            "{kind},{},{},{},{},{tr:.1},{sa:.2}",
-            f(m, "test_error"),
-            f(m, "mmd"),
-            f(m, "cov"),
-            f(m, "one_nna")
-        )?;
+        writeln!(csv, "{kind},{err},{mmd},{cov},{nna},{tr:.1},{sa:.2}")?;
     }
     writeln!(
         md,

@@ -305,7 +305,7 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
     }
     let preview = train.load_all()?;
     let shapes: Vec<TriMesh> = (0..preview.len().min(8))
-        .map(|i| meshes.coarse.with_positions(positions_of(&preview, i)))
+        .map(|i| meshes.coarse.with_positions(preview.positions(i)))
         .collect::<Result<_, _>>()?;
     let mut panels = vec![Panel::new(&meshes.coarse, None, "rest")];
     panels.extend(
@@ -329,14 +329,6 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
         t0.elapsed().as_secs_f64()
     );
     Ok(())
-}
-
-/// Signal `i` of a 3-channel set as vertex positions.
-fn positions_of(s: &InMemorySignals, i: usize) -> Vec<[f64; 3]> {
-    s.signal(i)
-        .chunks_exact(3)
-        .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
-        .collect()
 }
 
 /// Runs `mfm dataset gmm`.
@@ -577,7 +569,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         let path = a.out.join(format!("sample_{i:03}.ply"));
         if c == 3 {
             // Three channels are vertex positions: write the deformed mesh.
-            io::write_ply(&path, &mesh.with_positions(positions_of(&signals, i))?, &[])?;
+            io::write_ply(&path, &mesh.with_positions(signals.positions(i))?, &[])?;
         } else {
             let columns: Vec<Vec<f64>> = (0..c).map(|k| channel(&signals, i, k)).collect();
             let names: Vec<String> = (0..c)
@@ -601,7 +593,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     let values: Vec<Vec<f64>> = (0..k).map(|i| channel(&signals, i, 0)).collect();
     let deformed: Vec<TriMesh> = if c == 3 {
         (0..k)
-            .map(|i| mesh.with_positions(positions_of(&signals, i)))
+            .map(|i| mesh.with_positions(signals.positions(i)))
             .collect::<Result<_, _>>()?
     } else {
         Vec::new()
@@ -784,7 +776,7 @@ fn save_projection_grid(
     let shapes: Vec<TriMesh> = (0..p.projections.len())
         .flat_map(|i| {
             [
-                mesh.with_positions(positions_of(generated, i)),
+                mesh.with_positions(generated.positions(i)),
                 mesh.with_positions(p.projections[i].clone()),
             ]
         })

@@ -286,12 +286,7 @@ pub fn plausibility(
     let results = (0..shapes.len())
         .into_par_iter()
         .map(|i| {
-            let positions: Vec<[f64; 3]> = shapes
-                .signal(i)
-                .chunks_exact(3)
-                .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
-                .collect();
-            let p = project(&arap, space, &positions)?;
+            let p = project(&arap, space, &shapes.positions(i))?;
             Ok((p.mse, (i < keep).then_some(p.positions)))
         })
         .collect::<Result<Vec<_>>>()?;

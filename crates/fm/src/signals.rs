@@ -110,6 +110,16 @@ impl InMemorySignals {
         let n = self.vertices * self.channels;
         &self.data[i * n..(i + 1) * n]
     }
+
+    /// Signal `i` of a 3-channel set read as vertex positions, in `f64`
+    /// (`V` points). Callers check [`SignalSource::channels`] `== 3`; with
+    /// another channel count the values are regrouped by threes.
+    pub fn positions(&self, i: usize) -> Vec<[f64; 3]> {
+        self.signal(i)
+            .chunks_exact(3)
+            .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
+            .collect()
+    }
 }
 
 impl SignalSource for InMemorySignals {
