@@ -41,7 +41,16 @@ fn main() {
         .flag("-std=c++17")
         .flag(format!("-D_GLIBCXX_USE_CXX11_ABI={abi}"))
         .flag("-DGLOG_USE_GLOG_EXPORT")
+        // ATen's `parallel_for` is an inline template over `#pragma omp
+        // parallel` in OpenMP builds of torch: without `-fopenmp` it quietly
+        // runs the whole range on the calling thread.
+        .flag("-fopenmp")
         .opt_level(2)
         .file("csrc/mfm_autograd.cpp")
         .compile("mfm_autograd");
+    // The OpenMP runtime is the one libtorch itself loads (the wheel ships
+    // `libgomp.so.1` beside `libtorch_cpu.so`), so Rust kernels and torch's
+    // own share one thread pool.
+    println!("cargo:rustc-link-search=native={lib}");
+    println!("cargo:rustc-link-lib=dylib:+verbatim=libgomp.so.1");
 }

@@ -84,3 +84,12 @@ pub(crate) fn shape_error(
         found: t.size(),
     }
 }
+
+/// The error of a custom operation whose backward pass runs without the
+/// state its forward pass saves.
+pub(crate) fn backward_before_forward(op: &str) -> NetError {
+    NetError::CustomOp {
+        op: op.to_owned(),
+        message: "backward before forward".into(),
+    }
+}

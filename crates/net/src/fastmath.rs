@@ -24,8 +24,23 @@ pub(crate) fn exp(x: f32) -> f32 {
         + 0.5;
     let y = p * r * r + r + 1.0;
     // 2^n by building the exponent field (n in [-126, 127])
-    let scale = f32::from_bits(((n as i32 + 127) as u32) << 23);
+    let scale = f32::from_bits(integer_bits(n).wrapping_add(127) << 23);
     y * scale
+}
+
+/// `1.5 * 2^23`: adding it to an integer-valued `f32` of magnitude below
+/// `2^22` leaves that integer in the low mantissa bits.
+const ROUND_MAGIC: f32 = 12_582_912.0;
+
+/// The integer-valued `x` (`|x| < 2^22`) as the low bits of a `u32`
+/// (two's complement for negative `x`). Unlike `x as i32`, whose saturating
+/// semantics compile to a scalar compare-and-select per lane, this is an
+/// add and a subtraction, so loops using it stay vectorized.
+#[inline(always)]
+fn integer_bits(x: f32) -> u32 {
+    (x + ROUND_MAGIC)
+        .to_bits()
+        .wrapping_sub(ROUND_MAGIC.to_bits())
 }
 
 /// `ln(1 + y)` for `y` in `[0, 1]`, via `2 atanh(y / (2 + y))`.
@@ -67,7 +82,8 @@ const DP3: f32 = 3.774_895e-8;
 #[inline(always)]
 pub(crate) fn sincos(x: f32) -> (f32, f32) {
     let ax = x.abs().min(8192.0);
-    let j = (ax * FOPI) as i32;
+    // ax >= 0, so the floor is the truncation
+    let j = integer_bits((ax * FOPI).floor()) as i32;
     let j = (j + 1) & !1;
     let y = j as f32;
     let r = ((ax - y * DP1) - y * DP2) - y * DP3;

@@ -19,7 +19,7 @@
 use tch::{Device, Kind, Tensor};
 
 use crate::autograd::{CustomFunction, apply_custom, parallel_for};
-use crate::error::{NetError, Result, shape_error};
+use crate::error::{NetError, Result, backward_before_forward, shape_error};
 
 /// `eps` inside the magnitude of the complex nonlinearity:
 /// `|z| = sqrt(re^2 + im^2 + eps)`.
@@ -272,10 +272,10 @@ impl CustomFunction for Modulate {
     }
 
     fn backward(&mut self, grad_outputs: &[Tensor]) -> Result<Vec<Option<Tensor>>> {
-        let s = self.saved.as_ref().ok_or_else(|| NetError::CustomOp {
-            op: "modulate".into(),
-            message: "backward before forward".into(),
-        })?;
+        let s = self
+            .saved
+            .as_ref()
+            .ok_or_else(|| backward_before_forward("modulate"))?;
         let grad = first(grad_outputs, 0, "modulate")?.contiguous();
         let (n, c) = face_dims(&s.g, "modulate")?;
         let gs = s.g.size();
@@ -486,10 +486,10 @@ impl CustomFunction for MagnitudeGelu {
     }
 
     fn backward(&mut self, grad_outputs: &[Tensor]) -> Result<Vec<Option<Tensor>>> {
-        let s = self.saved.as_ref().ok_or_else(|| NetError::CustomOp {
-            op: "magnitude_gelu".into(),
-            message: "backward before forward".into(),
-        })?;
+        let s = self
+            .saved
+            .as_ref()
+            .ok_or_else(|| backward_before_forward("magnitude_gelu"))?;
         let grad = first(grad_outputs, 0, "magnitude_gelu")?.contiguous();
         let (n, c) = face_dims(&s.g, "magnitude_gelu")?;
         let opts = (s.g.kind(), Device::Cpu);
@@ -586,12 +586,14 @@ simd_kernel!(mod32_fwd_rows, mod32_fwd_rows_avx2, (gs: &[f32], pss: &[f32], o: P
         let (ph, raw) = (&pss[2 * i * c..(2 * i + 1) * c], &pss[(2 * i + 1) * c..(2 * i + 2) * c]);
         // SAFETY: rows 2i, 2i + 1 belong to the caller's chunk.
         let (or, oi) = unsafe { (o.row(2 * i, c), o.row(2 * i + 1, c)) };
-        for k in 0..c {
-            let (s, co) = fastmath::sincos(ph[k]);
-            let scale = fastmath::softplus(raw[k]) + eps;
+        // zipped iterators: no bounds checks, so the loop vectorizes whole
+        let ins = re.iter().zip(im).zip(ph.iter().zip(raw));
+        for (((&r, &m), (&p, &q)), (o_r, o_i)) in ins.zip(or.iter_mut().zip(oi.iter_mut())) {
+            let (s, co) = fastmath::sincos(p);
+            let scale = fastmath::softplus(q) + eps;
             let (ar, ai) = (scale * co, scale * s);
-            or[k] = ar * re[k] - ai * im[k];
-            oi[k] = ai * re[k] + ar * im[k];
+            *o_r = ar * r - ai * m;
+            *o_i = ai * r + ar * m;
         }
     }
 });
@@ -607,16 +609,18 @@ simd_kernel!(mod32_bwd_rows, mod32_bwd_rows_avx2, (gr: &[f32], gs: &[f32], pss: 
         // belong to the caller's chunk.
         let (ogr, ogi, ops) = unsafe { (og.row(2 * i, c), og.row(2 * i + 1, c), op.row(i, 2 * c)) };
         let (dphase, dscale) = ops.split_at_mut(c);
-        for k in 0..c {
-            let (s, co) = fastmath::sincos(ph[k]);
-            let scale = fastmath::softplus(raw[k]) + eps;
+        let ins = (dre.iter().zip(dim)).zip(re.iter().zip(im)).zip(ph.iter().zip(raw));
+        let outs = (ogr.iter_mut().zip(ogi.iter_mut())).zip(dphase.iter_mut().zip(dscale.iter_mut()));
+        for ((((&dr, &di), (&r, &m)), (&p, &q)), ((o_r, o_i), (o_p, o_s))) in ins.zip(outs) {
+            let (s, co) = fastmath::sincos(p);
+            let scale = fastmath::softplus(q) + eps;
             let (ar, ai) = (scale * co, scale * s);
-            ogr[k] = ar * dre[k] + ai * dim[k];
-            ogi[k] = ar * dim[k] - ai * dre[k];
-            let dmr = dre[k] * re[k] + dim[k] * im[k];
-            let dmi = dim[k] * re[k] - dre[k] * im[k];
-            dphase[k] = dmi * ar - dmr * ai;
-            dscale[k] = (dmr * co + dmi * s) * fastmath::sigmoid(raw[k]);
+            *o_r = ar * dr + ai * di;
+            *o_i = ar * di - ai * dr;
+            let dmr = dr * r + di * m;
+            let dmi = di * r - dr * m;
+            *o_p = dmi * ar - dmr * ai;
+            *o_s = (dmr * co + dmi * s) * fastmath::sigmoid(q);
         }
     }
 });
@@ -650,10 +654,10 @@ impl CustomFunction for Modulate32 {
     }
 
     fn backward(&mut self, grad_outputs: &[Tensor]) -> Result<Vec<Option<Tensor>>> {
-        let (g, ps) = self.saved.as_ref().ok_or_else(|| NetError::CustomOp {
-            op: "modulate".into(),
-            message: "backward before forward".into(),
-        })?;
+        let (g, ps) = self
+            .saved
+            .as_ref()
+            .ok_or_else(|| backward_before_forward("modulate"))?;
         let grad = first(grad_outputs, 0, "modulate")?.contiguous();
         let (n, c) = face_dims(g, "modulate")?;
         let opts = (Kind::Float, Device::Cpu);
@@ -679,11 +683,12 @@ simd_kernel!(mag32_fwd_rows, mag32_fwd_rows_avx2, (gs: &[f32], bias: &[f32], o: 
         let (re, im) = (&gs[2 * i * c..(2 * i + 1) * c], &gs[(2 * i + 1) * c..(2 * i + 2) * c]);
         // SAFETY: rows 2i, 2i + 1 belong to the caller's chunk.
         let (or, oi) = unsafe { (o.row(2 * i, c), o.row(2 * i + 1, c)) };
-        for k in 0..c {
-            let m = (re[k] * re[k] + im[k] * im[k] + eps).sqrt();
-            let r = fastmath::gelu(m + bias[k]) / m;
-            or[k] = re[k] * r;
-            oi[k] = im[k] * r;
+        let ins = re.iter().zip(im).zip(bias);
+        for (((&x, &y), &b), (o_r, o_i)) in ins.zip(or.iter_mut().zip(oi.iter_mut())) {
+            let m = (x * x + y * y + eps).sqrt();
+            let r = fastmath::gelu(m + b) / m;
+            *o_r = x * r;
+            *o_i = y * r;
         }
     }
 });
@@ -696,18 +701,20 @@ simd_kernel!(mag32_bwd_rows, mag32_bwd_rows_avx2, (gr: &[f32], gs: &[f32], bias:
         let (re, im) = (&gs[lo..mid], &gs[mid..hi]);
         // SAFETY: rows 2i, 2i + 1 belong to the caller's chunk.
         let (ogr, ogi) = unsafe { (og.row(2 * i, c), og.row(2 * i + 1, c)) };
-        for k in 0..c {
-            let m = (re[k] * re[k] + im[k] * im[k] + eps).sqrt();
+        let ins = (dre.iter().zip(dim)).zip(re.iter().zip(im)).zip(bias);
+        let outs = ogr.iter_mut().zip(ogi.iter_mut()).zip(gb.iter_mut());
+        for ((((&dr, &di), (&x, &y)), &b), ((o_r, o_i), g_b)) in ins.zip(outs) {
+            let m = (x * x + y * y + eps).sqrt();
             let inv_m = 1.0 / m;
-            let (a, da) = fastmath::gelu_with_grad(m + bias[k]);
+            let (a, da) = fastmath::gelu_with_grad(m + b);
             let r = a * inv_m;
             // s = dL/da, dpre = dL/d(|z| + b), dm = total dL/d|z|
-            let s = (dre[k] * re[k] + dim[k] * im[k]) * inv_m;
+            let s = (dr * x + di * y) * inv_m;
             let dpre = da * s;
             let dm = (dpre - s * r) * inv_m;
-            ogr[k] = dre[k] * r + dm * re[k];
-            ogi[k] = dim[k] * r + dm * im[k];
-            gb[k] += dpre;
+            *o_r = dr * r + dm * x;
+            *o_i = di * r + dm * y;
+            *g_b += dpre;
         }
     }
 });
@@ -745,10 +752,10 @@ impl CustomFunction for Magnitude32 {
     }
 
     fn backward(&mut self, grad_outputs: &[Tensor]) -> Result<Vec<Option<Tensor>>> {
-        let (g, bias) = self.saved.as_ref().ok_or_else(|| NetError::CustomOp {
-            op: "magnitude_gelu".into(),
-            message: "backward before forward".into(),
-        })?;
+        let (g, bias) = self
+            .saved
+            .as_ref()
+            .ok_or_else(|| backward_before_forward("magnitude_gelu"))?;
         let grad = first(grad_outputs, 0, "magnitude_gelu")?.contiguous();
         let (n, c) = face_dims(g, "magnitude_gelu")?;
         let grad_g = Tensor::empty(g.size().as_slice(), (Kind::Float, Device::Cpu));

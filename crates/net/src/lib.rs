@@ -17,7 +17,8 @@
 //!   means and the cached Cholesky factor of `L + eps I` as differentiable ops.
 //! - [`model`]: [`PoissonNet`] and its layers; [`config`]: [`PoissonNetConfig`]
 //!   with the presets `paper`, `medium`, `small`.
-//! - [`dense`]: `linear` layers with faer's matrix products.
+//! - [`dense`]: `linear` layers and the complex layers' products with faer's
+//!   matrix products.
 //! - [`fused`]: fused CPU kernels for the modulation and the magnitude
 //!   nonlinearity (with their torch reference implementations).
 //! - [`loss`]: mass- and area-weighted MSE, the flow-matching loss.
@@ -33,10 +34,14 @@
 //! (solves then use the `f64` factor).
 //!
 //! ## CPU performance
-//! A training step is dominated by dense products (the complex layers alone
-//! are ~70% of the ~537 GFLOP of a paper-preset step at batch 8 on the
-//! 3.5k-vertex bunny), then by memory-bound elementwise work on the face
-//! features, then by the sparse solves. What this crate does about it:
+//! A training step is dominated by dense products (the complex layers are
+//! ~68% of the ~537 GFLOP that a paper-preset step at batch 8 on the
+//! 3.5k-vertex bunny takes with four real products per complex product),
+//! then by elementwise work on the face features, then by the sparse solves.
+//! What this crate does about it:
+//! - complex layers take three real products instead of four (Gauss's form,
+//!   [`dense::complex_linear`]), forward and in both backward products: the
+//!   step's dense work drops to ~444 GFLOP;
 //! - dense layers use faer's GEMM ([`dense`]), ~15-25% faster per core than
 //!   the MKL inside the torch wheel on the AMD benchmark machine;
 //! - the modulation and the magnitude nonlinearity are single-pass fused
@@ -44,7 +49,8 @@
 //! - `G`, `G^T A2`, face means are gather kernels ([`mesh`]); the first
 //!   modulation layer runs on vertices (exact rewrite, see [`model`]);
 //! - Rust kernels run on libtorch's own intra-op threads
-//!   ([`autograd::parallel_for`]).
+//!   ([`autograd::parallel_for`]; the shim is compiled with OpenMP and linked
+//!   against the `libgomp` that ships with libtorch, so there is one pool).
 //!
 //! Two process settings matter a lot and are the caller's choice:
 //! - [`runtime::tune_allocator`]: without it glibc returns every large

@@ -69,8 +69,6 @@ fn gelu(x: &Tensor) -> Tensor {
 #[derive(Debug)]
 pub struct ComplexLinear {
     weight: Tensor,
-    input: i64,
-    output: i64,
 }
 
 impl ComplexLinear {
@@ -86,36 +84,13 @@ impl ComplexLinear {
                 up: bound,
             },
         );
-        Self {
-            weight,
-            input: input as i64,
-            output: output as i64,
-        }
+        Self { weight }
     }
 
-    /// The real `[2 C_in, 2 C_out]` matrix acting on rows `[re | im]`:
-    /// `[[W_re^T, W_im^T], [-W_im^T, W_re^T]]`.
-    fn real_matrix(&self) -> Tensor {
-        let wr = self.weight.get(0).tr();
-        let wi = self.weight.get(1).tr();
-        let top = Tensor::cat(&[&wr, &wi], 1);
-        let bottom = Tensor::cat(&[&(-&wi), &wr], 1);
-        Tensor::cat(&[top, bottom], 0)
-    }
-
-    /// Applies the layer to `[B, 2F, C_in]`, giving `[B, 2F, C_out]`: one real
-    /// matrix product of `[B F, 2 C_in]` by `[2 C_in, 2 C_out]`.
+    /// Applies the layer to `[B, 2F, C_in]`, giving `[B, 2F, C_out]`
+    /// ([`crate::dense::complex_linear`]: three real products per call).
     pub fn forward(&self, g: &Tensor) -> Result<Tensor> {
-        let s = g.size();
-        let (b, rows) = (s[0], s[1]);
-        let z = g.reshape([b * rows / 2, 2 * self.input]);
-        Ok(
-            crate::dense::linear(&z, &self.real_matrix().tr(), None)?.reshape([
-                b,
-                rows,
-                self.output,
-            ]),
-        )
+        crate::dense::complex_linear(g, &self.weight)
     }
 }
 

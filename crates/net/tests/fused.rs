@@ -6,7 +6,7 @@
 mod common;
 
 use common::{check_directional, randn, rel_max_diff};
-use mfm_net::dense::linear;
+use mfm_net::dense::{complex_linear, complex_linear_reference, linear};
 use mfm_net::fused::{magnitude_gelu, magnitude_gelu_reference, modulate, modulate_reference};
 use tch::{Kind, Tensor};
 
@@ -123,4 +123,97 @@ fn faer_linear_matches_torch_linear_in_value_and_gradient() {
     assert!(err < 1e-7, "FD {err}");
     assert!(linear(&randn(&[4, 3]), &randn(&[2, 4]), None).is_err());
     assert!(linear(&randn(&[4, 3]), &randn(&[2, 3]), Some(&randn(&[3]))).is_err());
+}
+
+/// The complex product of two `[n, c]` complex matrices written out entry by
+/// entry (an oracle independent of both implementations).
+fn complex_product_by_hand(z: &Tensor, w: &Tensor) -> Tensor {
+    let s = z.size();
+    let (o, k) = (w.size()[1], w.size()[2]);
+    let rows = s[..s.len() - 1].iter().product::<i64>() / 2;
+    let zz = z.reshape([rows, 2, k]);
+    let (zr, zi) = (zz.select(1, 0), zz.select(1, 1));
+    let (wr, wi) = (w.get(0), w.get(1));
+    let yr = zr.mm(&wr.tr()) - zi.mm(&wi.tr());
+    let yi = zr.mm(&wi.tr()) + zi.mm(&wr.tr());
+    let mut shape = s.clone();
+    *shape.last_mut().unwrap() = o;
+    Tensor::stack(&[yr, yi], 1).reshape(shape.as_slice())
+}
+
+#[test]
+fn complex_linear_matches_the_four_product_form_in_value_and_gradient() {
+    for threads in [1, 2] {
+        tch::set_num_threads(threads);
+        for kind in [Kind::Double, Kind::Float] {
+            // rows (3 x 2701 complex rows) span several chunks and weight-
+            // gradient blocks with remainders; C_in != C_out
+            for (k, o) in [(7, 5), (128, 3), (9, 33)] {
+                let z = randn(&[3, 2 * 2701, k]).to_kind(kind);
+                let w = randn(&[2, o, k]).to_kind(kind);
+                let r = randn(&[3, 2 * 2701, o]).to_kind(kind);
+                let ins = [z, w];
+                let (ya, ga) = grads(&|t| complex_linear(&t[0], &t[1]).unwrap(), &ins, &r);
+                let (yb, gb) = grads(&|t| complex_linear_reference(&t[0], &t[1]), &ins, &r);
+                let yc = complex_product_by_hand(&ins[0], &ins[1]);
+                // Gauss's form rounds differently from the four-product one
+                let tol = if kind == Kind::Double { 1e-11 } else { 2e-4 };
+                assert!(rel_max_diff(&ya, &yb) < tol, "{kind:?} {k}x{o} value");
+                assert!(rel_max_diff(&yb, &yc) < tol, "{kind:?} {k}x{o} reference");
+                for (i, (a, b)) in ga.iter().zip(&gb).enumerate() {
+                    let d = rel_max_diff(a, b);
+                    assert!(d < tol, "{kind:?} {k}x{o} gradient {i}: {d}");
+                }
+            }
+        }
+    }
+    tch::set_num_threads(1);
+    let f = |t: &[Tensor]| {
+        complex_linear(&t[0], &t[1])
+            .unwrap()
+            .tanh()
+            .sum(Kind::Double)
+    };
+    let err = check_directional(&[randn(&[2, 60, 6]), randn(&[2, 4, 6])], &f, 3, 1e-6);
+    assert!(err < 1e-7, "FD {err}");
+    // the weight gradient does not depend on the thread count
+    let z = randn(&[1, 2 * 9000, 16]).to_kind(Kind::Float);
+    let w = randn(&[2, 16, 16]).to_kind(Kind::Float);
+    let r = randn(&[1, 2 * 9000, 16]).to_kind(Kind::Float);
+    let per_threads: Vec<Vec<Tensor>> = [1, 2]
+        .iter()
+        .map(|&t| {
+            tch::set_num_threads(t);
+            grads(
+                &|t| complex_linear(&t[0], &t[1]).unwrap(),
+                &[z.shallow_clone(), w.shallow_clone()],
+                &r,
+            )
+            .1
+        })
+        .collect();
+    for (a, b) in per_threads[0].iter().zip(&per_threads[1]) {
+        assert!(a.equal(b), "gradients differ between 1 and 2 threads");
+    }
+    tch::set_num_threads(1);
+    assert!(complex_linear(&randn(&[1, 4, 3]), &randn(&[2, 2, 4])).is_err());
+    assert!(complex_linear(&randn(&[1, 3, 3]), &randn(&[2, 2, 3])).is_err());
+    assert!(complex_linear(&randn(&[1, 4, 3]), &randn(&[3, 2, 3])).is_err());
+}
+
+#[test]
+fn parallel_for_runs_on_several_threads() {
+    tch::set_num_threads(2);
+    let seen = std::sync::Mutex::new(std::collections::HashSet::new());
+    let covered = std::sync::atomic::AtomicUsize::new(0);
+    mfm_net::autograd::parallel_for(1000, 10, &|b, e| {
+        seen.lock().unwrap().insert(std::thread::current().id());
+        covered.fetch_add(e - b, std::sync::atomic::Ordering::Relaxed);
+        // long enough that one thread cannot take every chunk
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    });
+    tch::set_num_threads(1);
+    assert_eq!(covered.into_inner(), 1000);
+    // libtorch's OpenMP pool: the shim must be built with OpenMP for this
+    assert_eq!(seen.into_inner().unwrap().len(), 2);
 }
