@@ -39,9 +39,10 @@
 //! 3.5k-vertex bunny takes with four real products per complex product),
 //! then by elementwise work on the face features, then by the sparse solves.
 //! What this crate does about it:
-//! - complex layers take three real products instead of four (Gauss's form,
-//!   [`dense::complex_linear`]), forward and in both backward products: the
-//!   step's dense work drops to ~444 GFLOP;
+//! - complex layers at least 64 channels wide take three real products
+//!   instead of four (Gauss's form, [`dense::complex_linear`]), forward and
+//!   in both backward products: the paper step's dense work drops to ~444
+//!   GFLOP;
 //! - dense layers use faer's GEMM ([`dense`]), ~15-25% faster per core than
 //!   the MKL inside the torch wheel on the AMD benchmark machine;
 //! - the modulation and the magnitude nonlinearity are single-pass fused

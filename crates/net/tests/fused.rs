@@ -148,7 +148,9 @@ fn complex_linear_matches_the_four_product_form_in_value_and_gradient() {
         for kind in [Kind::Double, Kind::Float] {
             // rows (3 x 2701 complex rows) span several chunks and weight-
             // gradient blocks with remainders; C_in != C_out
-            for (k, o) in [(7, 5), (128, 3), (9, 33)] {
+            // the three-product path (both widths >= GAUSS_MIN_WIDTH) and
+            // the narrow ones that fall back to torch
+            for (k, o) in [(64, 64), (128, 80), (96, 64), (7, 5), (128, 3)] {
                 let z = randn(&[3, 2 * 2701, k]).to_kind(kind);
                 let w = randn(&[2, o, k]).to_kind(kind);
                 let r = randn(&[3, 2 * 2701, o]).to_kind(kind);
@@ -160,6 +162,10 @@ fn complex_linear_matches_the_four_product_form_in_value_and_gradient() {
                 let tol = if kind == Kind::Double { 1e-11 } else { 2e-4 };
                 assert!(rel_max_diff(&ya, &yb) < tol, "{kind:?} {k}x{o} value");
                 assert!(rel_max_diff(&yb, &yc) < tol, "{kind:?} {k}x{o} reference");
+                // the dispatch: the three-product form rounds differently
+                // from torch's product, the narrow fallback is torch's product
+                let gauss = k.min(o) >= mfm_net::dense::GAUSS_MIN_WIDTH;
+                assert_eq!(!ya.equal(&yb), gauss, "{kind:?} {k}x{o} path");
                 for (i, (a, b)) in ga.iter().zip(&gb).enumerate() {
                     let d = rel_max_diff(a, b);
                     assert!(d < tol, "{kind:?} {k}x{o} gradient {i}: {d}");
@@ -174,12 +180,12 @@ fn complex_linear_matches_the_four_product_form_in_value_and_gradient() {
             .tanh()
             .sum(Kind::Double)
     };
-    let err = check_directional(&[randn(&[2, 60, 6]), randn(&[2, 4, 6])], &f, 3, 1e-6);
+    let err = check_directional(&[randn(&[2, 60, 64]), randn(&[2, 64, 64])], &f, 3, 1e-6);
     assert!(err < 1e-7, "FD {err}");
     // the weight gradient does not depend on the thread count
-    let z = randn(&[1, 2 * 9000, 16]).to_kind(Kind::Float);
-    let w = randn(&[2, 16, 16]).to_kind(Kind::Float);
-    let r = randn(&[1, 2 * 9000, 16]).to_kind(Kind::Float);
+    let z = randn(&[1, 2 * 9000, 64]).to_kind(Kind::Float);
+    let w = randn(&[2, 64, 64]).to_kind(Kind::Float);
+    let r = randn(&[1, 2 * 9000, 64]).to_kind(Kind::Float);
     let per_threads: Vec<Vec<Tensor>> = [1, 2]
         .iter()
         .map(|&t| {
