@@ -36,7 +36,6 @@ arrays (vertex order changes the fill-in and the memory locality).
 import json
 import os
 import sys
-import time
 from importlib import metadata
 
 import igl
@@ -45,17 +44,7 @@ import scipy.sparse as sp
 from cholespy import CholeskySolverD, MatrixType
 from sksparse.cholmod import cholesky
 
-
-def time_ms(runs, fn):
-    """(median, min) wall time in milliseconds of `runs` calls after a warm-up."""
-    fn()
-    times = []
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - t0) * 1e3)
-    times.sort()
-    return times[len(times) // 2], times[0]
+from bench_timing import time_ms  # sibling module; scripts run by path
 
 
 def parse_args(argv):

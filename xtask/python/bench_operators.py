@@ -26,22 +26,11 @@ locality, hence timings):
 import json
 import os
 import sys
-import time
 
 import igl
 import numpy as np
 
-
-def time_ms(runs, fn):
-    """(median, min) wall time in milliseconds of `runs` calls after a warm-up."""
-    fn()
-    times = []
-    for _ in range(runs):
-        t0 = time.perf_counter()
-        fn()
-        times.append((time.perf_counter() - t0) * 1e3)
-    times.sort()
-    return times[len(times) // 2], times[0]
+from bench_timing import time_ms  # sibling module; scripts run by path
 
 
 def parse_args(argv):
