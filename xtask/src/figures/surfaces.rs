@@ -47,23 +47,11 @@ pub fn default_mesh_path(root: &Path) -> Option<PathBuf> {
     path.is_file().then_some(path)
 }
 
-/// A smooth closed surface without symmetries (so no repeated eigenvalues):
-/// an icosphere with `level` subdivisions pushed radially by a few
-/// low-frequency bumps and stretched into an ellipsoid. Deterministic.
+/// The built-in bunny-like surface `builtin:blob` of the CLI
+/// ([`procedural::blob`]) with `level` subdivisions: smooth, closed,
+/// uniformly triangulated. Deterministic.
 pub fn blob(level: u32) -> Result<TriMesh> {
-    let sphere = procedural::icosphere(level);
-    let positions = sphere
-        .positions()
-        .iter()
-        .map(|&[x, y, z]| {
-            let r = 1.0
-                + 0.2 * (2.0 * x + 0.7).sin() * (1.5 * y).cos()
-                + 0.1 * (3.0 * z - 0.4).sin()
-                + 0.08 * x * y;
-            [1.3 * r * x, r * y, 0.8 * r * z]
-        })
-        .collect();
-    Ok(sphere.with_positions(positions)?)
+    Ok(procedural::blob(level)?)
 }
 
 /// Loads `path` (or the default bunny, or falls back to [`blob`]) and
@@ -83,9 +71,11 @@ pub fn load(path: Option<&Path>, root: &Path) -> Result<Surface> {
             (name, mesh)
         }
         None => {
-            eprintln!("xtask: shared bunny not found; using a procedural blob (icosphere level 4)");
+            eprintln!(
+                "xtask: shared bunny not found; using the procedural blob (builtin:blob, level 4)"
+            );
             (
-                "procedural blob (bumpy icosphere, level 4)".to_owned(),
+                "procedural blob (builtin:blob, level 4)".to_owned(),
                 blob(4)?,
             )
         }
