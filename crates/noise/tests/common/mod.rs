@@ -10,8 +10,7 @@ use mfm_solver::{EigenOptions, Eigenpairs, generalized_eigenpairs};
 /// Laplacian has no symmetry-forced repeated eigenvalues. Deterministic.
 /// Unlike `procedural::blob` (relaxed to a uniform triangulation), the
 /// displacement stretches some triangles more than others; the tests'
-/// thresholds were set on this surface, and the naive noise's failure
-/// shows on it.
+/// thresholds were set on this surface.
 pub fn blob(level: u32) -> TriMesh {
     let sphere = procedural::icosphere(level);
     let positions = sphere
