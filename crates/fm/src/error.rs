@@ -39,6 +39,10 @@ pub enum FmError {
     /// An invalid parameter or configuration value.
     #[error("invalid configuration: {0}")]
     Config(String),
+    /// A numerical breakdown: sampling whose state or network output stopped
+    /// being finite, or a model whose weights are not finite.
+    #[error("{0}")]
+    Diverged(String),
     /// A mesh could not be read.
     #[error(transparent)]
     ReadMesh(#[from] mfm_geometry::io::ReadError),

@@ -250,6 +250,17 @@ impl Sampler {
         };
         let flow = FlowSpec::read(flow)?;
         let net = PoissonNet::load(weights, device)?;
+        // a run whose training blew up can leave NaN or inf weights; every
+        // sample would then fail deep inside the network
+        for (name, v) in net.var_store().variables() {
+            if !bool::try_from(v.isfinite().all()).unwrap_or(false) {
+                return Err(FmError::Diverged(format!(
+                    "{}: the weights `{name}` are not finite (NaN or inf): the training run \
+                     diverged; retrain with a lower train.lr",
+                    weights.display()
+                )));
+            }
+        }
         Self::new(net, flow)
     }
 
@@ -401,7 +412,7 @@ impl Sampler {
         let velocity = |x: &Tensor, t: f64, k: usize| -> Result<Tensor> {
             let finite = bool::try_from(x.isfinite().all()).unwrap_or(false);
             if !finite {
-                return Err(FmError::Config(format!(
+                return Err(FmError::Diverged(format!(
                     "sampling diverged at ODE step {k} of {} (t = {t:.3}): the state is not finite; \
                      the model does not handle this mesh or noise (e.g. noise far larger than the \
                      training data)",
@@ -409,7 +420,7 @@ impl Sampler {
                 )));
             }
             self.velocity(target, x, t).map_err(|e| match e {
-                FmError::Net(n) => FmError::Config(format!(
+                FmError::Net(n) => FmError::Diverged(format!(
                     "sampling failed at ODE step {k} of {} (t = {t:.3}): {n}",
                     options.steps
                 )),
@@ -427,7 +438,7 @@ impl Sampler {
             };
         }
         if !bool::try_from(x.isfinite().all()).unwrap_or(false) {
-            return Err(FmError::Config(format!(
+            return Err(FmError::Diverged(format!(
                 "sampling diverged: the final state after {} ODE steps is not finite",
                 options.steps
             )));

@@ -876,7 +876,7 @@ impl Trainer {
         let loss_t = loss::flow_matching_loss(&self.mesh, &out, &delta)?;
         let loss = loss_t.to_device(Device::Cpu).double_value(&[]);
         if !loss.is_finite() {
-            return Err(FmError::Config(format!(
+            return Err(FmError::Diverged(format!(
                 "training diverged at step {s}: the loss is {loss}; lower train.lr or check the data (the last checkpoint is intact)"
             )));
         }

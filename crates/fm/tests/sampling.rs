@@ -277,3 +277,20 @@ fn mismatched_networks_are_rejected() {
     f.condition_on_xyz = true;
     assert!(Sampler::new(affine_velocity_net(1.0, 0.0), f).is_err());
 }
+
+#[test]
+fn runs_with_non_finite_weights_are_refused_at_load() {
+    let run = tempfile::tempdir().unwrap();
+    tiny_run(run.path(), 1, false);
+    let weights = run.path().join(WEIGHTS_FILE);
+    let net = PoissonNet::load(&weights, Device::Cpu).unwrap();
+    let (name, mut v) = net.var_store().variables().into_iter().next().unwrap();
+    tch::no_grad(|| {
+        let _ = v.fill_(f64::NAN);
+    });
+    net.save(&weights).unwrap();
+    let err = Sampler::load(run.path(), Some(Device::Cpu)).unwrap_err();
+    assert!(matches!(err, mfm_fm::FmError::Diverged(_)), "{err}");
+    let msg = err.to_string();
+    assert!(msg.contains(&name) && msg.contains(WEIGHTS_FILE), "{msg}");
+}
