@@ -30,9 +30,14 @@ fn signals(mesh: &TriMesh, count: usize, channels: usize) -> Arc<InMemorySignals
 
 /// Trains a tiny model for a few steps on icosphere(1).
 fn tiny_run(dir: &std::path::Path, channels: usize, xyz: bool) -> TriMesh {
+    run_of_width(dir, channels, xyz, 8)
+}
+
+/// [`tiny_run`] with `width` channels.
+fn run_of_width(dir: &std::path::Path, channels: usize, xyz: bool, width: usize) -> TriMesh {
     let mesh = procedural::icosphere(1);
     let mut c = RunConfig::preset("cpu").unwrap();
-    c.model.width = Some(8);
+    c.model.width = Some(width);
     c.model.blocks = Some(1);
     c.model.vector_layers = Some(2);
     c.model.condition_on_xyz = xyz;
@@ -293,4 +298,29 @@ fn runs_with_non_finite_weights_are_refused_at_load() {
     assert!(matches!(err, mfm_fm::FmError::Diverged(_)), "{err}");
     let msg = err.to_string();
     assert!(msg.contains(&name) && msg.contains(WEIGHTS_FILE), "{msg}");
+}
+
+#[test]
+fn samples_do_not_depend_on_the_thread_count() {
+    // width 64 takes the three-product complex layers; icosphere(3) has
+    // enough faces (1280) for the row blocks to split over two threads
+    let run = tempfile::tempdir().unwrap();
+    run_of_width(run.path(), 3, true, 64);
+    let sampler = Sampler::load(run.path(), Some(Device::Cpu)).unwrap();
+    let fine = procedural::icosphere(3);
+    let opts = SampleOptions {
+        steps: 2,
+        method: OdeMethod::Midpoint,
+        batch: 2,
+    };
+    let by_threads: Vec<Vec<f32>> = [1, 2]
+        .iter()
+        .map(|&t| {
+            tch::set_num_threads(t);
+            sampler.sample(&fine, 2, 4, &opts).unwrap().data
+        })
+        .collect();
+    tch::set_num_threads(1);
+    assert!(by_threads[0].iter().all(|x| x.is_finite()));
+    assert_eq!(by_threads[0], by_threads[1]);
 }
