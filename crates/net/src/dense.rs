@@ -481,13 +481,18 @@ impl CustomFunction for ComplexLinearOp {
         if let Some(last) = shape.last_mut() {
             *last = o as i64;
         }
-        let out = Tensor::zeros(shape.as_slice(), (z.kind(), Device::Cpu));
-        if n > 0 && k > 0 && o > 0 {
+        let opts = (z.kind(), Device::Cpu);
+        let out = if n > 0 && k > 0 && o > 0 {
+            // every row is written by the kernel
+            let out = Tensor::empty(shape.as_slice(), opts);
             match z.kind() {
                 Kind::Double => complex_forward_kind::<f64>(&z, &w, &out, n, k, o),
                 _ => complex_forward_kind::<f32>(&z, &w, &out, n, k, o),
             }
-        }
+            out
+        } else {
+            Tensor::zeros(shape.as_slice(), opts)
+        };
         self.saved = Some((z, w));
         Ok(vec![out])
     }
