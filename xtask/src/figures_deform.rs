@@ -24,7 +24,9 @@
 //! Drives the release `mfm` binary (the xtask does not link libtorch).
 //! Writes `table.md`, `table.json`, and the folders and PNGs of every step.
 
-use crate::flow_steps::{Mfm, arg, fresh_dir, mesh_or_shared, out_dir, read_json, tag};
+use crate::flow_steps::{
+    Comparison, KindResult, Mfm, arg, fresh_dir, mesh_or_shared, num, out_dir, read_json, tag,
+};
 use crate::pyenv::PyEnv;
 use anyhow::{Context, Result};
 use serde_json::Value;
@@ -74,10 +76,6 @@ pub struct DeformArgs {
     pub seed: u64,
 }
 
-fn num(v: &Value, k: &str) -> f64 {
-    v[k].as_f64().unwrap_or(f64::NAN)
-}
-
 /// Number of parameters in a safetensors file (from its header).
 fn parameter_count(path: &Path) -> Result<u64> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
@@ -110,11 +108,8 @@ fn parameter_count(path: &Path) -> Result<u64> {
 
 /// One row of the ablation table.
 struct AblationRow {
-    kind: String,
-    metrics: Value,
+    result: KindResult,
     params: u64,
-    train_seconds: f64,
-    sample_seconds: f64,
 }
 
 /// Runs the experiment.
@@ -145,58 +140,24 @@ pub fn deform(env: &PyEnv, args: &DeformArgs) -> Result<()> {
     ])?;
     let dataset_seconds = start.elapsed().as_secs_f64();
     let space = data.join("space.json");
-    let reference = arg(&data.join("reference"));
 
     // 2. ablation
+    let comparison = Comparison {
+        out: &out,
+        preset: "cpu-deform",
+        dataset: &data.join("train"),
+        steps: args.steps,
+        seed: args.seed,
+        test_mesh: &data.join("eval.ply"),
+        samples: args.reference,
+        reference: &data.join("reference"),
+        picture: "shapes",
+    };
     let mut rows = Vec::new();
     for kind in &args.kinds {
-        let tag = tag(kind);
-        let run = out.join(format!("run_{tag}"));
-        let train_seconds = mfm.train(
-            "cpu-deform",
-            &data.join("train"),
-            &run,
-            args.steps,
-            args.seed,
-            kind,
-        )?;
-        let samples = out.join(format!("samples_{tag}"));
-        let t = Instant::now();
-        let sampled = mfm.sample(
-            &run,
-            &data.join("eval.ply"),
-            args.reference,
-            args.seed,
-            &samples,
-            &[],
-        );
-        let sample_seconds = t.elapsed().as_secs_f64();
-        let params = parameter_count(&run.join("model.safetensors"))?;
-        if let Err(e) = sampled {
-            // a kind whose sampling breaks down is a result, not a crash
-            println!("{kind}: sampling failed: {e:#}");
-            rows.push(AblationRow {
-                kind: kind.clone(),
-                metrics: serde_json::json!({ "error": format!("{e:#}") }),
-                params,
-                train_seconds,
-                sample_seconds,
-            });
-            continue;
-        }
-        let metrics = mfm.eval(
-            &samples.join("samples.npy"),
-            &["--reference", &reference],
-            &out.join(format!("metrics_{tag}.json")),
-            Some(&out.join(format!("shapes_{tag}.png"))),
-        )?;
-        rows.push(AblationRow {
-            kind: kind.clone(),
-            metrics,
-            params,
-            train_seconds,
-            sample_seconds,
-        });
+        let result = mfm.compare_kind(&comparison, kind)?;
+        let params = parameter_count(&result.run.join("model.safetensors"))?;
+        rows.push(AblationRow { result, params });
     }
     let main_run = out.join(format!("run_{}", tag(&args.kinds[0])));
 
@@ -238,13 +199,13 @@ pub fn deform(env: &PyEnv, args: &DeformArgs) -> Result<()> {
         md,
         "| noise | projection MSE x 1e4 | MMD | COV | 1-NNA | # params | train s | sample s |\n|---|---|---|---|---|---|---|---|"
     )?;
-    for r in &rows {
-        if r.metrics["error"].is_string() {
+    for AblationRow { result: r, params } in &rows {
+        if r.failed() {
             // mfm's own message is in the log above and in table.json
             writeln!(
                 md,
                 "| {} | sampling failed (see the log) | | | | {} | {:.0} | {:.1} |",
-                r.kind, r.params, r.train_seconds, r.sample_seconds
+                r.kind, params, r.train_seconds, r.sample_seconds
             )?;
             continue;
         }
@@ -256,7 +217,7 @@ pub fn deform(env: &PyEnv, args: &DeformArgs) -> Result<()> {
             num(&r.metrics, "mmd"),
             num(&r.metrics, "cov"),
             num(&r.metrics, "one_nna"),
-            r.params,
+            params,
             r.train_seconds,
             r.sample_seconds
         )?;
@@ -265,7 +226,7 @@ pub fn deform(env: &PyEnv, args: &DeformArgs) -> Result<()> {
         writeln!(
             md,
             "\nHeld-out reference shapes themselves project with MSE x 1e4 = {:.4} (the floor of the metric).",
-            num(&r.metrics, "reference_projection_mse") * 1e4
+            num(&r.result.metrics, "reference_projection_mse") * 1e4
         )?;
     }
     writeln!(
@@ -279,8 +240,8 @@ from a held-out shape to its nearest training shape {:.4} (both on the training 
         "mesh": mesh, "steps": args.steps, "n": args.n, "reference": args.reference,
         "coarse_faces": args.coarse_faces, "seed": args.seed,
         "dataset_seconds": dataset_seconds,
-        "ablation": rows.iter().map(|r| serde_json::json!({
-            "noise": r.kind, "metrics": r.metrics, "parameters": r.params,
+        "ablation": rows.iter().map(|AblationRow { result: r, params }| serde_json::json!({
+            "noise": r.kind, "metrics": r.metrics, "parameters": params,
             "train_seconds": r.train_seconds, "sample_seconds": r.sample_seconds,
         })).collect::<Vec<_>>(),
         "nearest_training_distance": {

@@ -12,7 +12,7 @@
 //! `table.json`, and per kind the run folder, the samples and
 //! `means_KIND.png` (point-wise mean, generated vs reference).
 
-use crate::flow_steps::{Mfm, arg, fresh_dir, mesh_or_shared, out_dir, tag};
+use crate::flow_steps::{Comparison, Mfm, arg, fresh_dir, mesh_or_shared, num, out_dir};
 use crate::pyenv::PyEnv;
 use anyhow::Result;
 use serde_json::Value;
@@ -71,40 +71,22 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
         &args.seed.to_string(),
     ])?;
     let dataset_seconds = start.elapsed().as_secs_f64();
-    let test_mesh = data.join("reference/mesh.ply");
-    let reference = arg(&data.join("reference"));
-    let mut rows: Vec<(String, Value, f64, f64)> = Vec::new();
-    for kind in &args.kinds {
-        let tag = tag(kind);
-        let run = out.join(format!("run_{tag}"));
-        let train_seconds = mfm.train(
-            "cpu",
-            &data.join("train"),
-            &run,
-            args.steps,
-            args.seed,
-            kind,
-        )?;
-        let samples = out.join(format!("samples_{tag}"));
-        let t = Instant::now();
-        let sampled = mfm.sample(&run, &test_mesh, args.reference, args.seed, &samples, &[]);
-        let sample_seconds = t.elapsed().as_secs_f64();
-        if let Err(e) = sampled {
-            // a kind whose sampling breaks down is a result, not a crash
-            println!("{kind}: sampling failed: {e:#}");
-            let failed = serde_json::json!({ "error": format!("{e:#}") });
-            rows.push((kind.clone(), failed, train_seconds, sample_seconds));
-            continue;
-        }
-        let metrics = mfm.eval(
-            &samples.join("samples.npy"),
-            &["--reference", &reference],
-            &out.join(format!("metrics_{tag}.json")),
-            Some(&out.join(format!("means_{tag}.png"))),
-        )?;
-        rows.push((kind.clone(), metrics, train_seconds, sample_seconds));
-    }
-    let f = |v: &Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+    let comparison = Comparison {
+        out: &out,
+        preset: "cpu",
+        dataset: &data.join("train"),
+        steps: args.steps,
+        seed: args.seed,
+        test_mesh: &data.join("reference/mesh.ply"),
+        samples: args.reference,
+        reference: &data.join("reference"),
+        picture: "means",
+    };
+    let rows = args
+        .kinds
+        .iter()
+        .map(|kind| mfm.compare_kind(&comparison, kind))
+        .collect::<Result<Vec<_>>>()?;
     let mut md = String::new();
     writeln!(
         md,
@@ -117,8 +99,9 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
         "| noise | test error | MMD | COV | 1-NNA | train s | sample s |\n|---|---|---|---|---|---|---|"
     )?;
     let mut csv = String::from("noise,test_error,mmd,cov,one_nna,train_seconds,sample_seconds\n");
-    for (kind, m, tr, sa) in &rows {
-        if m["error"].is_string() {
+    for r in &rows {
+        let (kind, m, tr, sa) = (&r.kind, &r.metrics, r.train_seconds, r.sample_seconds);
+        if r.failed() {
             // mfm's own message is in the log above and in table.json
             writeln!(
                 md,
@@ -127,7 +110,7 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
             writeln!(csv, "{kind},,,,,{tr:.1},{sa:.2}")?;
             continue;
         }
-        let [err, mmd, cov, nna] = ["test_error", "mmd", "cov", "one_nna"].map(|k| f(m, k));
+        let [err, mmd, cov, nna] = ["test_error", "mmd", "cov", "one_nna"].map(|k| num(m, k));
         writeln!(
             md,
             "| {kind} | {err:.4} | {mmd:.4} | {cov:.3} | {nna:.3} | {tr:.0} | {sa:.1} |"
@@ -143,9 +126,10 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
     std::fs::write(out.join("table.csv"), &csv)?;
     let json: Vec<Value> = rows
         .iter()
-        .map(|(kind, m, tr, sa)| {
+        .map(|r| {
             serde_json::json!({
-                "noise": kind, "metrics": m, "train_seconds": tr, "sample_seconds": sa,
+                "noise": r.kind, "metrics": r.metrics,
+                "train_seconds": r.train_seconds, "sample_seconds": r.sample_seconds,
             })
         })
         .collect();

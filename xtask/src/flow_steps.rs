@@ -52,6 +52,57 @@ pub fn tag(kind: &str) -> String {
         .collect()
 }
 
+/// The number `v[k]`, NaN when it is missing.
+pub fn num(v: &Value, k: &str) -> f64 {
+    v[k].as_f64().unwrap_or(f64::NAN)
+}
+
+/// What each noise kind of a figure's comparison table is trained on and
+/// evaluated against.
+pub struct Comparison<'a> {
+    /// The experiment's output folder: runs, samples and metrics go to
+    /// `run_TAG`, `samples_TAG`, `metrics_TAG.json`, `PICTURE_TAG.png`.
+    pub out: &'a Path,
+    /// `mfm train --preset`.
+    pub preset: &'a str,
+    /// Training dataset folder.
+    pub dataset: &'a Path,
+    /// Training steps.
+    pub steps: u64,
+    /// Seed of the training run and of the samples.
+    pub seed: u64,
+    /// Mesh the samples are generated on.
+    pub test_mesh: &'a Path,
+    /// Number of samples.
+    pub samples: usize,
+    /// Reference dataset folder (`mfm eval --reference`).
+    pub reference: &'a Path,
+    /// File-name stem of `mfm eval`'s picture.
+    pub picture: &'a str,
+}
+
+/// One noise kind's row of a comparison table.
+pub struct KindResult {
+    /// The noise kind (`mfm train --noise`).
+    pub kind: String,
+    /// The run folder.
+    pub run: PathBuf,
+    /// `mfm eval`'s metrics, or `{"error": message}` when sampling broke
+    /// down (a result of the experiment, not a crash).
+    pub metrics: Value,
+    /// Wall seconds of training.
+    pub train_seconds: f64,
+    /// Wall seconds of sampling (until the failure, if it failed).
+    pub sample_seconds: f64,
+}
+
+impl KindResult {
+    /// Whether sampling failed.
+    pub fn failed(&self) -> bool {
+        self.metrics["error"].is_string()
+    }
+}
+
 /// Reads a JSON file.
 pub fn read_json(path: &Path) -> Result<Value> {
     let text =
@@ -105,7 +156,7 @@ impl Mfm<'_> {
     }
 
     /// `mfm sample --run RUN --mesh MESH --n N --seed SEED --out OUT
-    /// [EXTRA...]`; returns the wall seconds.
+    /// [EXTRA...]`.
     pub fn sample(
         &self,
         run: &Path,
@@ -114,8 +165,7 @@ impl Mfm<'_> {
         seed: u64,
         out: &Path,
         extra: &[&str],
-    ) -> Result<f64> {
-        let t = Instant::now();
+    ) -> Result<()> {
         let (run, mesh, n, seed, out) = (
             arg(run),
             arg(mesh),
@@ -127,8 +177,7 @@ impl Mfm<'_> {
             "sample", "--run", &run, "--mesh", &mesh, "--n", &n, "--seed", &seed, "--out", &out,
         ];
         args.extend_from_slice(extra);
-        self.run(&args)?;
-        Ok(t.elapsed().as_secs_f64())
+        self.run(&args)
     }
 
     /// `mfm eval --samples SAMPLES AGAINST... --out OUT [--png PNG]`, where
@@ -151,5 +200,37 @@ impl Mfm<'_> {
         }
         self.run(&args)?;
         read_json(out)
+    }
+
+    /// Trains `kind` as `c` says, samples on the test mesh and evaluates the
+    /// samples against the reference set. A kind whose sampling breaks down
+    /// gives a row with `{"error": ...}` (and says so) instead of an error.
+    pub fn compare_kind(&self, c: &Comparison<'_>, kind: &str) -> Result<KindResult> {
+        let tag = tag(kind);
+        let run = c.out.join(format!("run_{tag}"));
+        let train_seconds = self.train(c.preset, c.dataset, &run, c.steps, c.seed, kind)?;
+        let samples = c.out.join(format!("samples_{tag}"));
+        let t = Instant::now();
+        let sampled = self.sample(&run, c.test_mesh, c.samples, c.seed, &samples, &[]);
+        let sample_seconds = t.elapsed().as_secs_f64();
+        let metrics = match sampled {
+            Ok(()) => self.eval(
+                &samples.join("samples.npy"),
+                &["--reference", &arg(c.reference)],
+                &c.out.join(format!("metrics_{tag}.json")),
+                Some(&c.out.join(format!("{}_{tag}.png", c.picture))),
+            )?,
+            Err(e) => {
+                println!("{kind}: sampling failed: {e:#}");
+                serde_json::json!({ "error": format!("{e:#}") })
+            }
+        };
+        Ok(KindResult {
+            kind: kind.to_owned(),
+            run,
+            metrics,
+            train_seconds,
+            sample_seconds,
+        })
     }
 }
