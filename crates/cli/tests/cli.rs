@@ -11,6 +11,23 @@ fn mfm(args: &[&str]) -> Output {
         .expect("the mfm binary runs")
 }
 
+/// Writes `config` to `DIR/run.toml` and runs `mfm train --config
+/// DIR/run.toml --dataset DIR/data/train --out DIR/run --quiet`.
+fn train_with_config(dir: &Path, config: &str) -> Output {
+    let p = |s: &str| dir.join(s).to_string_lossy().into_owned();
+    std::fs::write(dir.join("run.toml"), config).unwrap();
+    mfm(&[
+        "train",
+        "--config",
+        &p("run.toml"),
+        "--dataset",
+        &p("data/train"),
+        "--out",
+        &p("run"),
+        "--quiet",
+    ])
+}
+
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
@@ -492,17 +509,7 @@ fn gmm_dataset_train_sample_eval_end_to_end() {
     let config = "[model]\npreset = \"small\"\nwidth = 8\nblocks = 1\nvector_layers = 1\n\
                   [train]\nsteps = 4\nbatch = 2\ncheckpoint_every = 2\nlog_every = 1\n\
                   [sample]\nsteps = 2\n";
-    std::fs::write(dir.path().join("run.toml"), config).unwrap();
-    let o = mfm(&[
-        "train",
-        "--config",
-        &p("run.toml"),
-        "--dataset",
-        &p("data/train"),
-        "--out",
-        &p("run"),
-        "--quiet",
-    ]);
+    let o = train_with_config(dir.path(), config);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(dir.path().join("run/model.safetensors").is_file());
     let log = std::fs::read_to_string(dir.path().join("run/train_log.csv")).unwrap();
@@ -629,17 +636,7 @@ fn deformation_dataset_trains_on_coarse_and_samples_on_finer_meshes() {
     let config = "[model]\npreset = \"small\"\nwidth = 8\nblocks = 1\nvector_layers = 1\ncondition_on_xyz = true\n\
                   [train]\nsteps = 3\nbatch = 2\ncheckpoint_every = 3\nlog_every = 1\n\
                   [train.augment]\nscale = 0.1\nshift = 0.05\n[sample]\nsteps = 2\n";
-    std::fs::write(dir.path().join("run.toml"), config).unwrap();
-    let o = mfm(&[
-        "train",
-        "--config",
-        &p("run.toml"),
-        "--dataset",
-        &p("data/train"),
-        "--out",
-        &p("run"),
-        "--quiet",
-    ]);
+    let o = train_with_config(dir.path(), config);
     assert!(o.status.success(), "{}", stderr(&o));
 
     // resolution transfer: the original mesh and a 4x refinement of it

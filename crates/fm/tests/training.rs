@@ -68,6 +68,17 @@ fn weights(path: &Path) -> BTreeMap<String, Tensor> {
         .collect()
 }
 
+/// Some variable of `a` differs from its namesake in `b`.
+fn assert_weights_differ(a: &Path, b: &Path) {
+    let (wa, wb) = (weights(a), weights(b));
+    assert!(
+        wa.iter().any(|(k, t)| !t.equal(&wb[k])),
+        "{} and {} hold the same weights",
+        a.display(),
+        b.display()
+    );
+}
+
 fn assert_bit_identical(a: &Path, b: &Path) {
     let (wa, wb) = (weights(a), weights(b));
     assert_eq!(wa.keys().collect::<Vec<_>>(), wb.keys().collect::<Vec<_>>());
@@ -200,11 +211,10 @@ fn interrupted_and_resumed_runs_equal_the_uninterrupted_run() {
         .unwrap()
         .run(&no_stop(), false)
         .unwrap();
-    let (a, b) = (
-        weights(&full.path().join(WEIGHTS_FILE)),
-        weights(&d.path().join(WEIGHTS_FILE)),
+    assert_weights_differ(
+        &full.path().join(WEIGHTS_FILE),
+        &d.path().join(WEIGHTS_FILE),
     );
-    assert!(a.iter().any(|(k, t)| !t.equal(&b[k])));
 }
 
 #[test]
@@ -243,11 +253,10 @@ fn augmented_position_runs_resume_bit_for_bit_and_differ_from_plain_ones() {
         .unwrap()
         .run(&no_stop(), false)
         .unwrap();
-    let (a, b) = (
-        weights(&full.path().join(WEIGHTS_FILE)),
-        weights(&d.path().join(WEIGHTS_FILE)),
+    assert_weights_differ(
+        &full.path().join(WEIGHTS_FILE),
+        &d.path().join(WEIGHTS_FILE),
     );
-    assert!(a.iter().any(|(k, t)| !t.equal(&b[k])));
 
     // scalar signals cannot be augmented as positions
     let scalar = smooth_signals(&mesh, 4, 1);
