@@ -34,6 +34,16 @@ fn smooth_signals(mesh: &TriMesh, count: usize, channels: usize) -> Arc<InMemory
 }
 
 /// A tiny network and run: width 8, one block, two complex layers.
+/// A run of `cfg` trained to its last step in a fresh temporary folder.
+fn trained_run(cfg: RunConfig, mesh: &TriMesh, signals: Arc<InMemorySignals>) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    Trainer::new(dir.path(), cfg, mesh, signals)
+        .unwrap()
+        .run(&no_stop(), false)
+        .unwrap();
+    dir
+}
+
 fn tiny_config(steps: u64) -> RunConfig {
     let mut c = RunConfig::preset("cpu").unwrap();
     c.model.width = Some(8);
@@ -144,11 +154,7 @@ fn interrupted_and_resumed_runs_equal_the_uninterrupted_run() {
     let signals = smooth_signals(&mesh, 5, 2);
     let cfg = tiny_config(20);
 
-    let full = tempfile::tempdir().unwrap();
-    Trainer::new(full.path(), cfg.clone(), &mesh, signals.clone())
-        .unwrap()
-        .run(&no_stop(), false)
-        .unwrap();
+    let full = trained_run(cfg.clone(), &mesh, signals.clone());
 
     // stopped cleanly at step 7 (between checkpoints and log rows), resumed
     let stopped = tempfile::tempdir().unwrap();
@@ -206,11 +212,7 @@ fn interrupted_and_resumed_runs_equal_the_uninterrupted_run() {
     // the run really moved: different seeds give different weights
     let mut other_seed = cfg.clone();
     other_seed.train.seed = 12;
-    let d = tempfile::tempdir().unwrap();
-    Trainer::new(d.path(), other_seed, &mesh, signals)
-        .unwrap()
-        .run(&no_stop(), false)
-        .unwrap();
+    let d = trained_run(other_seed, &mesh, signals);
     assert_weights_differ(
         &full.path().join(WEIGHTS_FILE),
         &d.path().join(WEIGHTS_FILE),
@@ -226,11 +228,7 @@ fn augmented_position_runs_resume_bit_for_bit_and_differ_from_plain_ones() {
     cfg.train.augment.scale = 0.2;
     cfg.train.augment.shift = 0.1;
 
-    let full = tempfile::tempdir().unwrap();
-    Trainer::new(full.path(), cfg.clone(), &mesh, signals.clone())
-        .unwrap()
-        .run(&no_stop(), false)
-        .unwrap();
+    let full = trained_run(cfg.clone(), &mesh, signals.clone());
     let stopped = tempfile::tempdir().unwrap();
     Trainer::new(stopped.path(), cfg.clone(), &mesh, signals.clone())
         .unwrap()
@@ -248,11 +246,7 @@ fn augmented_position_runs_resume_bit_for_bit_and_differ_from_plain_ones() {
     // the augmentation is really applied: without it the weights differ
     let mut plain = cfg.clone();
     plain.train.augment = Default::default();
-    let d = tempfile::tempdir().unwrap();
-    Trainer::new(d.path(), plain, &mesh, signals)
-        .unwrap()
-        .run(&no_stop(), false)
-        .unwrap();
+    let d = trained_run(plain, &mesh, signals);
     assert_weights_differ(
         &full.path().join(WEIGHTS_FILE),
         &d.path().join(WEIGHTS_FILE),
@@ -270,11 +264,7 @@ fn damaged_checkpoints_are_named_and_skipped() {
     let mesh = procedural::icosphere(1);
     let signals = smooth_signals(&mesh, 3, 1);
     let cfg = tiny_config(10);
-    let run = tempfile::tempdir().unwrap();
-    Trainer::new(run.path(), cfg.clone(), &mesh, signals.clone())
-        .unwrap()
-        .run(&no_stop(), false)
-        .unwrap();
+    let run = trained_run(cfg.clone(), &mesh, signals.clone());
     let c5 = checkpoint::checkpoint_dir(run.path(), 5);
     let c10 = checkpoint::checkpoint_dir(run.path(), 10);
     let weights10 = c10.join(WEIGHTS_FILE);
