@@ -9,7 +9,9 @@
 //! ([`crate::autograd::parallel_for`]), each running a sequential product, so
 //! no second thread pool competes with torch's. The weight gradient (a
 //! reduction over all rows, where faer's kernels on row-major data are
-//! slower) stays with torch's `mm`.
+//! slower for wide layers) stays with torch's `mm` for large weights and
+//! runs as fixed-size blocked faer products for small ones (below
+//! [`FAER_WEIGHT_GRADIENT_MAX`] entries), where MKL mostly packs.
 //!
 //! [`complex_linear`] is the complex layers' product `z -> W z` with three
 //! real products instead of four (Gauss's form), in the forward pass and in
@@ -81,6 +83,16 @@ fn gemm_rows<T: Real>(
         }
     });
 }
+
+/// Largest weight (`C_out * C_in` entries) whose gradient [`linear`]
+/// computes with faer ([`weight_gradient`]); larger ones use torch's `mm`
+/// (MKL). The weight gradient is a long reduction over all rows: for the
+/// paper preset's `128 x 384` and `256 x 128` weights MKL was ~4% faster on
+/// the whole step (65-70 vs 48 GFLOPS per core), while for the small
+/// preset's `64 x 64` and narrower ones MKL spends most of its time packing
+/// (`scopy`, `mscale`) and faer's blocked sums made the step ~4% faster
+/// (interleaved runs, 2026-11-26).
+pub const FAER_WEIGHT_GRADIENT_MAX: usize = 8192;
 
 struct Linear {
     saved: Option<(Tensor, Tensor)>,
@@ -163,10 +175,24 @@ impl CustomFunction for Linear {
                 gemm_rows(gs, ws, Ptr(grad_x.data_ptr() as *mut f32), n, o, k, false);
             }
         }
-        // the weight gradient is a long reduction (k = rows): MKL does it
-        // faster than faer's row-major kernels (measured 65-70 vs 48 GFLOPS)
-        let (ni, oi, ki) = (n as i64, o as i64, k as i64);
-        let grad_w = g.reshape([ni, oi]).tr().mm(&x.reshape([ni, ki]));
+        let grad_w = if o * k <= FAER_WEIGHT_GRADIENT_MAX {
+            let gw = match x.kind() {
+                Kind::Double => {
+                    // SAFETY: contiguous CPU tensors of type f64.
+                    let (gs, xs) = unsafe { (slice::<f64>(&g), slice::<f64>(x)) };
+                    Tensor::from_slice(&weight_gradient(xs, gs, n, k, o))
+                }
+                _ => {
+                    // SAFETY: contiguous CPU tensors of type f32.
+                    let (gs, xs) = unsafe { (slice::<f32>(&g), slice::<f32>(x)) };
+                    Tensor::from_slice(&weight_gradient(xs, gs, n, k, o))
+                }
+            };
+            gw.reshape([o as i64, k as i64])
+        } else {
+            let (ni, oi, ki) = (n as i64, o as i64, k as i64);
+            g.reshape([ni, oi]).tr().mm(&x.reshape([ni, ki]))
+        };
         let mut grads = vec![Some(grad_x), Some(grad_w)];
         if self.has_bias {
             let gb =
@@ -225,6 +251,7 @@ trait Real:
     + Sync
     + std::ops::Add<Output = Self>
     + std::ops::Sub<Output = Self>
+    + std::ops::AddAssign
     + 'static
 {
 }
@@ -236,6 +263,7 @@ impl<T> Real for T where
         + Sync
         + std::ops::Add<Output = T>
         + std::ops::Sub<Output = T>
+        + std::ops::AddAssign
         + 'static
 {
 }
@@ -263,7 +291,9 @@ fn complex_chunk(width: usize) -> usize {
 /// three-product form. Below it the three small products and the extra
 /// passes cost more than the product saved: at width 32 (the `small` preset)
 /// torch's one four-product GEMM gave 6% faster training steps and 15-20%
-/// faster inference, at width 64 the three-product form was 3-9% faster.
+/// faster inference than the three-product form, and the same product
+/// through [`linear`]'s faer kernels another ~7% on the training step; at
+/// width 64 the three-product form was 3-9% faster.
 pub const GAUSS_MIN_WIDTH: i64 = 64;
 
 /// The three real matrices of a complex matrix `M = A + iB` (`[k, o]` each)
@@ -404,6 +434,38 @@ where
     grad
 }
 
+/// Weight gradient `dW = Gy^T X` (`[o, k]` row-major) of `Y = X W^T` for `n`
+/// rows, summed over fixed blocks of [`WEIGHT_GRADIENT_BLOCK`] rows (in
+/// parallel, then added in order, so the result does not depend on the
+/// thread count).
+fn weight_gradient<T: Real>(x: &[T], gy: &[T], n: usize, k: usize, o: usize) -> Vec<T> {
+    let blocks = n.div_ceil(WEIGHT_GRADIENT_BLOCK);
+    let mut partials = vec![T::zero_impl(); blocks * o * k];
+    let pp = Ptr(partials.as_mut_ptr());
+    parallel_for(blocks, 1, &|begin, end| {
+        for b in begin..end {
+            // SAFETY: block b owns its o k partial values.
+            let p = unsafe { std::slice::from_raw_parts_mut(pp.get().add(b * o * k), o * k) };
+            let (r0, r1) = (
+                b * WEIGHT_GRADIENT_BLOCK,
+                ((b + 1) * WEIGHT_GRADIENT_BLOCK).min(n),
+            );
+            let rows = r1 - r0;
+            let xm = MatRef::from_row_major_slice(&x[r0 * k..r1 * k], rows, k);
+            let gm = MatRef::from_row_major_slice(&gy[r0 * o..r1 * o], rows, o).transpose();
+            let d = MatMut::from_row_major_slice_mut(p, o, k);
+            matmul(d, Accum::Replace, gm, xm, T::one_impl(), Par::Seq);
+        }
+    });
+    let mut grad = vec![T::zero_impl(); o * k];
+    for p in partials.chunks_exact(o * k) {
+        for (g, &v) in grad.iter_mut().zip(p) {
+            *g += v;
+        }
+    }
+    grad
+}
+
 struct ComplexLinearOp {
     saved: Option<(Tensor, Tensor)>,
 }
@@ -524,10 +586,11 @@ impl CustomFunction for ComplexLinearOp {
 /// disguise, but computed with three real products of size `C_in x C_out`
 /// (Gauss's trick) instead of four, in the forward pass and in both backward
 /// products, with faer kernels on the CPU for `f32`/`f64` (see the
-/// [module docs](self)). Layers narrower than [`GAUSS_MIN_WIDTH`], other
-/// devices and other kinds use the four-product real form through torch
-/// ([`complex_linear_reference`]). The three-product form rounds differently from the
-/// four-product one (relative differences of a few ulps times `C_in`).
+/// [module docs](self)). Layers narrower than [`GAUSS_MIN_WIDTH`] use the
+/// four-product real form as one [`linear`] product; other devices and other
+/// kinds use it through torch ([`complex_linear_reference`]). The
+/// three-product form rounds differently from the four-product one
+/// (relative differences of a few ulps times `C_in`).
 ///
 /// Complexity: `6 R C_in C_out` multiply-adds forward, twice that backward.
 pub fn complex_linear(z: &Tensor, weight: &Tensor) -> Result<Tensor> {
@@ -550,8 +613,13 @@ pub fn complex_linear(z: &Tensor, weight: &Tensor) -> Result<Tensor> {
     }
     let cpu = z.device() == Device::Cpu && weight.device() == Device::Cpu;
     let kinds = matches!(z.kind(), Kind::Float | Kind::Double) && weight.kind() == z.kind();
-    if !(cpu && kinds) || ws[1].min(ws[2]) < GAUSS_MIN_WIDTH {
+    if !(cpu && kinds) {
         return Ok(complex_linear_reference(z, weight));
+    }
+    if ws[1].min(ws[2]) < GAUSS_MIN_WIDTH {
+        // one faer product with the real matrix (its weight gradient flows
+        // back through `real_matrix`'s concatenations)
+        return as_real_product(z, weight, |rows, real| linear(rows, &real.tr(), None));
     }
     let mut out = apply_custom(ComplexLinearOp { saved: None }, &[z, weight])?;
     Ok(out.remove(0))
@@ -571,15 +639,26 @@ fn real_matrix(weight: &Tensor) -> Tensor {
 /// `[R, 2 C_in] x [2 C_in, 2 C_out]` product with the real matrix
 /// `[[Wr^T, Wi^T], [-Wi^T, Wr^T]]` acting on rows `[re | im]`.
 pub fn complex_linear_reference(z: &Tensor, weight: &Tensor) -> Tensor {
+    as_real_product(z, weight, |rows, real| {
+        Ok::<_, std::convert::Infallible>(rows.mm(real))
+    })
+    .unwrap_or_else(|e| match e {})
+}
+
+/// `product([R, 2 C_in] rows, [2 C_in, 2 C_out] real matrix)` reshaped back
+/// to `[..., 2R, C_out]`: the four-product form of [`complex_linear`].
+fn as_real_product<E>(
+    z: &Tensor,
+    weight: &Tensor,
+    product: impl FnOnce(&Tensor, &Tensor) -> std::result::Result<Tensor, E>,
+) -> std::result::Result<Tensor, E> {
     let s = z.size();
     let (o, k) = (weight.size()[1], weight.size()[2]);
     let rows: i64 = s[..s.len() - 1].iter().product();
-    let real = real_matrix(weight);
     let mut out_shape = s.clone();
     if let Some(last) = out_shape.last_mut() {
         *last = o;
     }
-    z.reshape([rows / 2, 2 * k])
-        .mm(&real)
-        .reshape(out_shape.as_slice())
+    let y = product(&z.reshape([rows / 2, 2 * k]), &real_matrix(weight))?;
+    Ok(y.reshape(out_shape.as_slice()))
 }

@@ -542,39 +542,44 @@ pub fn magnitude_gelu(g: &Tensor, bias: &Tensor) -> Result<Tensor> {
 // with and without AVX2, chosen at run time). Nothing but the inputs is saved
 // for the backward pass, which recomputes the rest.
 
-use crate::fastmath;
+use crate::fastmath::{self, Fused, MulAdd, Separate};
 
-/// Runs `body(begin, end)` compiled for AVX2 when the CPU has it.
+/// Defines `$name::<M>` (the kernel, generic over how the polynomials
+/// multiply-add) and `$avx`, the kernel compiled for AVX2 and FMA with fused
+/// multiply-adds.
 macro_rules! simd_kernel {
     ($name:ident, $avx:ident, ($($arg:ident: $ty:ty),*), $body:block) => {
         #[inline(always)]
         #[allow(clippy::too_many_arguments)]
-        fn $name($($arg: $ty),*) $body
+        fn $name<M: MulAdd>($($arg: $ty),*) $body
 
         #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2")]
+        #[target_feature(enable = "avx2,fma")]
         #[allow(clippy::too_many_arguments)]
         unsafe fn $avx($($arg: $ty),*) {
-            $name($($arg),*)
+            $name::<Fused>($($arg),*)
         }
     };
 }
 
-/// Calls the AVX2 variant when available, the portable one otherwise.
+/// Calls the AVX2 + FMA variant when the CPU has both, the portable one
+/// (separate multiplications and additions) otherwise.
 macro_rules! simd_call {
     ($name:ident, $avx:ident, ($($arg:expr),*)) => {{
         #[cfg(target_arch = "x86_64")]
         {
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked above).
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                // SAFETY: the CPU supports AVX2 and FMA (checked above).
                 unsafe { $avx($($arg),*) }
             } else {
-                $name($($arg),*)
+                $name::<Separate>($($arg),*)
             }
         }
         #[cfg(not(target_arch = "x86_64"))]
         {
-            $name($($arg),*)
+            $name::<Separate>($($arg),*)
         }
     }};
 }
@@ -589,8 +594,8 @@ simd_kernel!(mod32_fwd_rows, mod32_fwd_rows_avx2, (gs: &[f32], pss: &[f32], o: P
         // zipped iterators: no bounds checks, so the loop vectorizes whole
         let ins = re.iter().zip(im).zip(ph.iter().zip(raw));
         for (((&r, &m), (&p, &q)), (o_r, o_i)) in ins.zip(or.iter_mut().zip(oi.iter_mut())) {
-            let (s, co) = fastmath::sincos(p);
-            let scale = fastmath::softplus(q) + eps;
+            let (s, co) = fastmath::sincos::<M>(p);
+            let scale = fastmath::softplus::<M>(q) + eps;
             let (ar, ai) = (scale * co, scale * s);
             *o_r = ar * r - ai * m;
             *o_i = ai * r + ar * m;
@@ -612,15 +617,15 @@ simd_kernel!(mod32_bwd_rows, mod32_bwd_rows_avx2, (gr: &[f32], gs: &[f32], pss: 
         let ins = (dre.iter().zip(dim)).zip(re.iter().zip(im)).zip(ph.iter().zip(raw));
         let outs = (ogr.iter_mut().zip(ogi.iter_mut())).zip(dphase.iter_mut().zip(dscale.iter_mut()));
         for ((((&dr, &di), (&r, &m)), (&p, &q)), ((o_r, o_i), (o_p, o_s))) in ins.zip(outs) {
-            let (s, co) = fastmath::sincos(p);
-            let scale = fastmath::softplus(q) + eps;
+            let (s, co) = fastmath::sincos::<M>(p);
+            let scale = fastmath::softplus::<M>(q) + eps;
             let (ar, ai) = (scale * co, scale * s);
             *o_r = ar * dr + ai * di;
             *o_i = ar * di - ai * dr;
             let dmr = dr * r + di * m;
             let dmi = di * r - dr * m;
             *o_p = dmi * ar - dmr * ai;
-            *o_s = (dmr * co + dmi * s) * fastmath::sigmoid(q);
+            *o_s = (dmr * co + dmi * s) * fastmath::sigmoid::<M>(q);
         }
     }
 });
@@ -686,7 +691,7 @@ simd_kernel!(mag32_fwd_rows, mag32_fwd_rows_avx2, (gs: &[f32], bias: &[f32], o: 
         let ins = re.iter().zip(im).zip(bias);
         for (((&x, &y), &b), (o_r, o_i)) in ins.zip(or.iter_mut().zip(oi.iter_mut())) {
             let m = (x * x + y * y + eps).sqrt();
-            let r = fastmath::gelu(m + b) / m;
+            let r = fastmath::gelu::<M>(m + b) / m;
             *o_r = x * r;
             *o_i = y * r;
         }
@@ -706,7 +711,7 @@ simd_kernel!(mag32_bwd_rows, mag32_bwd_rows_avx2, (gr: &[f32], gs: &[f32], bias:
         for ((((&dr, &di), (&x, &y)), &b), ((o_r, o_i), g_b)) in ins.zip(outs) {
             let m = (x * x + y * y + eps).sqrt();
             let inv_m = 1.0 / m;
-            let (a, da) = fastmath::gelu_with_grad(m + b);
+            let (a, da) = fastmath::gelu_with_grad::<M>(m + b);
             let r = a * inv_m;
             // s = dL/da, dpre = dL/d(|z| + b), dm = total dL/d|z|
             let s = (dr * x + di * y) * inv_m;

@@ -141,6 +141,134 @@ impl Incidence {
     }
 }
 
+/// The loops of [`FaceOperator`]'s CPU kernels over a range of output rows
+/// (compiled twice: portable, and for AVX2 + FMA chosen at run time).
+struct GatherKernel<'a> {
+    faces: &'a [[u32; 3]],
+    incidence: &'a Incidence,
+    rows: usize,
+    num_vertices: usize,
+    c: usize,
+}
+
+impl GatherKernel<'_> {
+    /// `A x` for face items `begin..end` (`b F + f`) or, with `adjoint`,
+    /// `A^T y` for vertex items `begin..end` (`b V + v`), written to `out`.
+    fn dispatch<T: Scalar>(
+        &self,
+        adjoint: bool,
+        input: &[T],
+        coef: &[T],
+        out: SyncPtr<T>,
+        begin: usize,
+        end: usize,
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU supports AVX2 and FMA (checked above).
+            unsafe { self.run_avx2(adjoint, input, coef, out, begin, end) };
+            return;
+        }
+        self.run(adjoint, input, coef, out, begin, end);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn run_avx2<T: Scalar>(
+        &self,
+        adjoint: bool,
+        input: &[T],
+        coef: &[T],
+        out: SyncPtr<T>,
+        begin: usize,
+        end: usize,
+    ) {
+        self.run(adjoint, input, coef, out, begin, end);
+    }
+
+    #[inline(always)]
+    fn run<T: Scalar>(
+        &self,
+        adjoint: bool,
+        input: &[T],
+        coef: &[T],
+        out: SyncPtr<T>,
+        begin: usize,
+        end: usize,
+    ) {
+        if adjoint {
+            self.adjoint_rows(input, coef, out, begin, end);
+        } else {
+            self.forward_rows(input, coef, out, begin, end);
+        }
+    }
+
+    #[inline(always)]
+    fn forward_rows<T: Scalar>(
+        &self,
+        x: &[T],
+        coef: &[T],
+        out: SyncPtr<T>,
+        begin: usize,
+        end: usize,
+    ) {
+        let (v, f, rows, c) = (self.num_vertices, self.faces.len(), self.rows, self.c);
+        for idx in begin..end {
+            let (b, fi) = (idx / f, idx % f);
+            let xb = &x[b * v * c..(b + 1) * v * c];
+            let [i0, i1, i2] = self.faces[fi].map(|i| i as usize);
+            let (x0, x1, x2) = (
+                &xb[i0 * c..i0 * c + c],
+                &xb[i1 * c..i1 * c + c],
+                &xb[i2 * c..i2 * c + c],
+            );
+            for r in 0..rows {
+                let k = &coef[(fi * rows + r) * 3..(fi * rows + r) * 3 + 3];
+                let (k0, k1, k2) = (k[0], k[1], k[2]);
+                // SAFETY: row (idx R + r) belongs to this range only and is
+                // inside the output (nb F R rows of c).
+                let o = unsafe {
+                    std::slice::from_raw_parts_mut(out.get().add((idx * rows + r) * c), c)
+                };
+                for (((o, &a), &b), &d) in o.iter_mut().zip(x0).zip(x1).zip(x2) {
+                    *o = k0 * a + k1 * b + k2 * d;
+                }
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn adjoint_rows<T: Scalar>(
+        &self,
+        y: &[T],
+        adj: &[T],
+        out: SyncPtr<T>,
+        begin: usize,
+        end: usize,
+    ) {
+        let (v, f, rows, c) = (self.num_vertices, self.faces.len(), self.rows, self.c);
+        let inc = self.incidence;
+        for idx in begin..end {
+            let (b, vi) = (idx / v, idx % v);
+            let yb = &y[b * f * rows * c..(b + 1) * f * rows * c];
+            // SAFETY: row idx belongs to this range only.
+            let o = unsafe { std::slice::from_raw_parts_mut(out.get().add(idx * c), c) };
+            o.fill(T::default());
+            for k in inc.ptr[vi]..inc.ptr[vi + 1] {
+                let fi = inc.face[k] as usize;
+                for r in 0..rows {
+                    let w = adj[k * rows + r];
+                    let yr = &yb[(fi * rows + r) * c..(fi * rows + r + 1) * c];
+                    for (o, &y) in o.iter_mut().zip(yr) {
+                        *o += w * y;
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// Sparse face-from-vertex operator `A`: `(A x)[R f + r] = sum_j c[f, r, j]
 /// x[faces[f][j]]` for `R` rows per face, and its adjoint.
 struct FaceOperator {
@@ -299,59 +427,30 @@ impl FaceOperator {
     }
 
     fn forward_kernel<T: Scalar>(&self, x: &[T], out: &mut [T], nb: usize, c: usize, coef: &[T]) {
-        let (v, f, rows) = (self.num_vertices, self.num_faces(), self.rows);
-        let faces = &self.faces[..];
+        let k = GatherKernel {
+            faces: &self.faces[..],
+            incidence: &self.incidence,
+            rows: self.rows,
+            num_vertices: self.num_vertices,
+            c,
+        };
         let optr = SyncPtr(out.as_mut_ptr());
-        let total = nb * f;
-        parallel_for(total, 256, &|begin, end| {
-            for idx in begin..end {
-                let (b, fi) = (idx / f, idx % f);
-                let xb = &x[b * v * c..(b + 1) * v * c];
-                let [i0, i1, i2] = faces[fi].map(|i| i as usize);
-                let (x0, x1, x2) = (
-                    &xb[i0 * c..i0 * c + c],
-                    &xb[i1 * c..i1 * c + c],
-                    &xb[i2 * c..i2 * c + c],
-                );
-                for r in 0..rows {
-                    let k = &coef[(fi * rows + r) * 3..(fi * rows + r) * 3 + 3];
-                    let (k0, k1, k2) = (k[0], k[1], k[2]);
-                    // SAFETY: row (idx R + r) belongs to this chunk only and is
-                    // inside `out` (nb F R rows of c).
-                    let o = unsafe {
-                        std::slice::from_raw_parts_mut(optr.get().add((idx * rows + r) * c), c)
-                    };
-                    for ch in 0..c {
-                        o[ch] = k0 * x0[ch] + k1 * x1[ch] + k2 * x2[ch];
-                    }
-                }
-            }
+        parallel_for(nb * k.faces.len(), 256, &|begin, end| {
+            k.dispatch(false, x, coef, optr, begin, end)
         });
     }
 
     fn adjoint_kernel<T: Scalar>(&self, y: &[T], out: &mut [T], nb: usize, c: usize, adj: &[T]) {
-        let (v, f, rows) = (self.num_vertices, self.num_faces(), self.rows);
-        let inc = &*self.incidence;
+        let k = GatherKernel {
+            faces: &self.faces[..],
+            incidence: &self.incidence,
+            rows: self.rows,
+            num_vertices: self.num_vertices,
+            c,
+        };
         let optr = SyncPtr(out.as_mut_ptr());
-        let total = nb * v;
-        parallel_for(total, 128, &|begin, end| {
-            for idx in begin..end {
-                let (b, vi) = (idx / v, idx % v);
-                let yb = &y[b * f * rows * c..(b + 1) * f * rows * c];
-                // SAFETY: row idx belongs to this chunk only.
-                let o = unsafe { std::slice::from_raw_parts_mut(optr.get().add(idx * c), c) };
-                o.fill(T::default());
-                for k in inc.ptr[vi]..inc.ptr[vi + 1] {
-                    let fi = inc.face[k] as usize;
-                    for r in 0..rows {
-                        let w = adj[k * rows + r];
-                        let yr = &yb[(fi * rows + r) * c..(fi * rows + r + 1) * c];
-                        for ch in 0..c {
-                            o[ch] += w * yr[ch];
-                        }
-                    }
-                }
-            }
+        parallel_for(nb * self.num_vertices, 128, &|begin, end| {
+            k.dispatch(true, y, adj, optr, begin, end)
         });
     }
 

@@ -98,25 +98,46 @@ fn faer_linear_matches_torch_linear_in_value_and_gradient() {
     for threads in [1, 2] {
         tch::set_num_threads(threads);
         for kind in [Kind::Double, Kind::Float] {
-            // 3-d input, rows not a multiple of the block split
-            let x = randn(&[3, 301, 7]).to_kind(kind);
-            let w = randn(&[5, 7]).to_kind(kind);
-            let b = randn(&[5]).to_kind(kind);
-            let r = randn(&[3, 301, 5]).to_kind(kind);
-            let ins = [x, w, b];
-            let (ya, ga) = grads(&|t| linear(&t[0], &t[1], Some(&t[2])).unwrap(), &ins, &r);
-            let (yb, gb) = grads(&|t| t[0].linear(&t[1], Some(&t[2])), &ins, &r);
-            let tol = if kind == Kind::Double { 1e-12 } else { 1e-5 };
-            assert!(rel_max_diff(&ya, &yb) < tol, "{kind:?} value");
-            for (a, b) in ga.iter().zip(&gb) {
-                assert!(
-                    rel_max_diff(a, b) < tol,
-                    "{kind:?} gradient {}",
-                    rel_max_diff(a, b)
+            // 3-d input, rows not a multiple of the block split; a small
+            // weight (faer's blocked weight gradient, rows over two blocks)
+            // and one above FAER_WEIGHT_GRADIENT_MAX (torch's)
+            for (rows, k, o) in [(1501, 7, 5), (301, 130, 70)] {
+                assert_eq!(
+                    k * o <= mfm_net::dense::FAER_WEIGHT_GRADIENT_MAX as i64,
+                    k == 7
                 );
+                let x = randn(&[3, rows, k]).to_kind(kind);
+                let w = randn(&[o, k]).to_kind(kind);
+                let b = randn(&[o]).to_kind(kind);
+                let r = randn(&[3, rows, o]).to_kind(kind);
+                let ins = [x, w, b];
+                let (ya, ga) = grads(&|t| linear(&t[0], &t[1], Some(&t[2])).unwrap(), &ins, &r);
+                let (yb, gb) = grads(&|t| t[0].linear(&t[1], Some(&t[2])), &ins, &r);
+                let tol = if kind == Kind::Double { 1e-12 } else { 1e-5 };
+                assert!(rel_max_diff(&ya, &yb) < tol, "{kind:?} {k}x{o} value");
+                for (a, b) in ga.iter().zip(&gb) {
+                    let d = rel_max_diff(a, b);
+                    assert!(d < tol, "{kind:?} {k}x{o} gradient {d}");
+                }
             }
         }
     }
+    // the blocked weight gradient does not depend on the thread count
+    let x = randn(&[9000, 48]).to_kind(Kind::Float);
+    let w = randn(&[40, 48]).to_kind(Kind::Float);
+    let r = randn(&[9000, 40]).to_kind(Kind::Float);
+    let per_threads: Vec<Tensor> = [1, 2]
+        .iter()
+        .map(|&t| {
+            tch::set_num_threads(t);
+            let ins = [x.shallow_clone(), w.shallow_clone()];
+            grads(&|t| linear(&t[0], &t[1], None).unwrap(), &ins, &r).1[1].shallow_clone()
+        })
+        .collect();
+    assert!(
+        per_threads[0].equal(&per_threads[1]),
+        "weight gradients differ between 1 and 2 threads"
+    );
     tch::set_num_threads(1);
     let f = |t: &[Tensor]| linear(&t[0], &t[1], None).unwrap().tanh().sum(Kind::Double);
     let err = check_directional(&[randn(&[40, 6]), randn(&[3, 6])], &f, 3, 1e-6);
@@ -141,6 +162,24 @@ fn complex_product_by_hand(z: &Tensor, w: &Tensor) -> Tensor {
     Tensor::stack(&[yr, yi], 1).reshape(shape.as_slice())
 }
 
+/// The narrow layers' path written out: `[R, 2k] x [[Wr^T, Wi^T], [-Wi^T, Wr^T]]`
+/// through [`linear`].
+fn four_product_through_linear(z: &Tensor, w: &Tensor) -> Tensor {
+    let s = z.size();
+    let (o, k) = (w.size()[1], w.size()[2]);
+    let rows = s[..s.len() - 1].iter().product::<i64>() / 2;
+    let (wr, wi) = (w.get(0).tr(), w.get(1).tr());
+    let real = Tensor::cat(
+        &[Tensor::cat(&[&wr, &wi], 1), Tensor::cat(&[&(-&wi), &wr], 1)],
+        0,
+    );
+    let mut shape = s.clone();
+    *shape.last_mut().unwrap() = o;
+    linear(&z.reshape([rows, 2 * k]), &real.tr(), None)
+        .unwrap()
+        .reshape(shape.as_slice())
+}
+
 #[test]
 fn complex_linear_matches_the_four_product_form_in_value_and_gradient() {
     for threads in [1, 2] {
@@ -162,10 +201,11 @@ fn complex_linear_matches_the_four_product_form_in_value_and_gradient() {
                 let tol = if kind == Kind::Double { 1e-11 } else { 2e-4 };
                 assert!(rel_max_diff(&ya, &yb) < tol, "{kind:?} {k}x{o} value");
                 assert!(rel_max_diff(&yb, &yc) < tol, "{kind:?} {k}x{o} reference");
-                // the dispatch: the three-product form rounds differently
-                // from torch's product, the narrow fallback is torch's product
+                // the dispatch: narrow layers are one `linear` product with
+                // the real matrix (bit for bit), wide ones are not
                 let gauss = k.min(o) >= mfm_net::dense::GAUSS_MIN_WIDTH;
-                assert_eq!(!ya.equal(&yb), gauss, "{kind:?} {k}x{o} path");
+                let yd = four_product_through_linear(&ins[0], &ins[1]);
+                assert_eq!(!ya.equal(&yd), gauss, "{kind:?} {k}x{o} path");
                 for (i, (a, b)) in ga.iter().zip(&gb).enumerate() {
                     let d = rel_max_diff(a, b);
                     assert!(d < tol, "{kind:?} {k}x{o} gradient {i}: {d}");
