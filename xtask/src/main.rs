@@ -8,6 +8,8 @@
 //! - `demo`: the main job on a built-in default.
 //! - `bench operators`: operator assembly times, ours and libigl's, in one run.
 //! - `bench noise`: Matérn sampling, ours against CHOLMOD and cholespy, in one run.
+//! - `bench net`: PoissonNet training steps and inference at the three presets, in
+//!   interleaved rounds (optionally against a baseline `mfm`), next to the reference times.
 //! - `reproduce-figures gmm`: the paper's GMM table at CPU scale (noise
 //!   kinds compared on a non-uniform test mesh).
 //! - `reproduce-figures deform`: the paper's deformation experiments at CPU
@@ -21,6 +23,7 @@
 //!   rendered offscreen with pyvista.
 
 mod bench;
+mod bench_net;
 mod bench_noise;
 mod demo;
 mod figures;
@@ -127,6 +130,31 @@ enum BenchCmd {
         #[arg(long, default_value_t = 3)]
         runs: usize,
     },
+    /// PoissonNet training step (forward, backward, Adam) and batch-1
+    /// inference at the presets (`mfm net bench`), in rounds; with
+    /// `--baseline`, interleaved with another `mfm` binary. Compared with the
+    /// reference PyTorch times of DESIGN.md section 9.
+    Net {
+        /// Mesh file or builtin:NAME.
+        #[arg(long, default_value = "../shared/meshes/bunny.off")]
+        mesh: String,
+        /// Comma-separated presets (batch 8 for paper and medium, 4 for small).
+        #[arg(long, default_value = "small,medium,paper")]
+        presets: String,
+        /// Rounds; each runs every preset once per binary.
+        #[arg(long, default_value_t = 3)]
+        rounds: usize,
+        /// Timed training steps per run.
+        #[arg(long, default_value_t = 4)]
+        steps: usize,
+        /// libtorch threads (the reference was timed with 2).
+        #[arg(long, default_value_t = 2)]
+        threads: usize,
+        /// Another `mfm` binary (e.g. built from an older commit) to
+        /// interleave with.
+        #[arg(long)]
+        baseline: Option<PathBuf>,
+    },
 }
 
 /// The workspace root (parent of this crate's folder).
@@ -229,6 +257,39 @@ fn main() -> Result<()> {
                 tau,
                 runs,
             })
+        }
+        Cmd::Bench(BenchCmd::Net {
+            mesh,
+            presets,
+            rounds,
+            steps,
+            threads,
+            baseline,
+        }) => {
+            let env = pyenv::ensure()?;
+            let exe = demo::mfm_binary(&env)?;
+            let mesh = if mesh.starts_with("builtin:") || Path::new(&mesh).is_absolute() {
+                mesh
+            } else {
+                root().join(&mesh).to_string_lossy().into_owned()
+            };
+            if !mesh.starts_with("builtin:") && !Path::new(&mesh).is_file() {
+                anyhow::bail!(
+                    "{mesh}: mesh file not found (pass --mesh PATH or builtin:blob; the default needs ../shared/meshes)"
+                );
+            }
+            bench_net::net(
+                &exe,
+                &bench_net::NetBench {
+                    mesh: &mesh,
+                    presets: &presets,
+                    rounds,
+                    steps,
+                    threads,
+                    baseline: baseline.as_deref(),
+                },
+                &bench_net::output_dir(),
+            )
         }
         Cmd::ReproduceFigures(FiguresCmd::Spectral(args)) => figures::spectral(&args),
         Cmd::ReproduceFigures(FiguresCmd::Gmm(args)) => {

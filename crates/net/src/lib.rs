@@ -58,12 +58,15 @@
 //!   activation to the kernel and each step pays page faults for all of them
 //!   (measured: 7x slower elementwise products). [`bench::bench_training_step`]
 //!   calls it; training binaries should too, once at start-up.
-//! - libtorch's OpenMP workers busy-wait between parallel regions. On a
-//!   machine shared with other busy processes that makes multi-threaded runs
-//!   several times slower; start such runs with `OMP_WAIT_POLICY=PASSIVE` in
-//!   the environment (it is read when libtorch loads, so it cannot be set from
-//!   inside the process), or use one thread (`tch::set_num_threads(1)`), as
-//!   the tests do for tiny meshes.
+//! - libtorch's OpenMP workers busy-wait between parallel regions (the
+//!   default policy). On an otherwise idle machine that is the fast choice:
+//!   the small preset's batch-1 inference took 25-27 ms with it and 35-52 ms
+//!   with `OMP_WAIT_POLICY=PASSIVE`, which puts the workers to sleep after
+//!   each region. On a machine shared with other busy processes the spinning
+//!   makes multi-threaded runs several times slower; start such runs with
+//!   `OMP_WAIT_POLICY=PASSIVE` in the environment (it is read when libtorch
+//!   loads, so it cannot be set from inside the process), or use one thread
+//!   (`tch::set_num_threads(1)`), as the tests do for tiny meshes.
 //!
 //! ## Example
 //! ```

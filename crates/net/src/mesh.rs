@@ -59,7 +59,7 @@ use std::sync::{Arc, Mutex};
 use faer::MatMut;
 use mfm_geometry::operators::Operators;
 use mfm_geometry::{Topology, TriMesh};
-use mfm_solver::{LaplacianSolver, ShiftOptions};
+use mfm_solver::{LaplacianSolver, SOLVE_CHUNK, ShiftOptions};
 use tch::{Device, Kind, Tensor};
 
 use crate::autograd::{LinearOperator, apply_linear, parallel_for};
@@ -538,6 +538,57 @@ impl LinearOperator for FaceOperator {
 }
 
 /// `(L + eps I)^-1` as a self-adjoint linear operator on `[..., V, C]`.
+/// Solves the row-major block `[items, rows, width]` at `data` in place with
+/// `factor`, one right-hand side per (item, channel): chunks of up to
+/// [`SOLVE_CHUNK`] channels of one item are solved on libtorch's threads
+/// ([`parallel_for`]), each read and written one contiguous row at a time
+/// (no transposes). A non-finite entry is reported with `col = item * width
+/// + channel`.
+fn solve_channels<T: mfm_solver::Real>(
+    factor: &mfm_solver::CholeskyFactor<T>,
+    data: SyncPtr<T>,
+    items: usize,
+    rows: usize,
+    width: usize,
+) -> Result<()> {
+    let per_item = width.div_ceil(SOLVE_CHUNK);
+    let failure: Mutex<Option<mfm_solver::SolverError>> = Mutex::new(None);
+    if rows == 0 {
+        return Ok(());
+    }
+    parallel_for(items * per_item, 1, &|t0, t1| {
+        for t in t0..t1 {
+            let (item, chunk) = (t / per_item, t % per_item);
+            let c0 = chunk * SOLVE_CHUNK;
+            let k = SOLVE_CHUNK.min(width - c0);
+            // SAFETY: task t owns columns c0..c0 + k of item `item`,
+            // disjoint from every other task's; the block holds
+            // items * rows * width elements.
+            let m = unsafe {
+                MatMut::from_raw_parts_mut(
+                    data.get().add(item * rows * width + c0),
+                    rows,
+                    k,
+                    width as isize,
+                    1,
+                )
+            };
+            if let Err(mut e) = factor.solve_in_place_sequential(m) {
+                if let mfm_solver::SolverError::NonFinite { col, .. } = &mut e {
+                    *col += item * width + c0;
+                }
+                if let Ok(mut slot) = failure.lock() {
+                    slot.get_or_insert(e);
+                }
+            }
+        }
+    });
+    match failure.into_inner().ok().flatten() {
+        Some(e) => Err(e.into()),
+        None => Ok(()),
+    }
+}
+
 struct PoissonSolveOp {
     solver: Arc<LaplacianSolver>,
 }
@@ -566,38 +617,18 @@ impl PoissonSolveOp {
                 });
             }
         };
-        // column-major V x (nb C): one right-hand side per (batch item, channel)
-        let buf = Tensor::empty([nb, c, v], (work, Device::Cpu));
-        let src = b.reshape([nb, v, c]).transpose(1, 2);
-        let mut buf = buf;
-        buf.copy_(&src);
-        let cols = (nb * c) as usize;
-        let rows = v as usize;
-        if cols > 0 && rows > 0 {
-            match work {
-                Kind::Double => {
-                    // SAFETY: fresh contiguous CPU f64 buffer of rows * cols.
-                    let data = unsafe {
-                        std::slice::from_raw_parts_mut(buf.data_ptr() as *mut f64, rows * cols)
-                    };
-                    self.solver
-                        .solve_many_in_place(MatMut::from_column_major_slice_mut(
-                            data, rows, cols,
-                        ))?;
-                }
-                _ => {
-                    // SAFETY: fresh contiguous CPU f32 buffer of rows * cols.
-                    let data = unsafe {
-                        std::slice::from_raw_parts_mut(buf.data_ptr() as *mut f32, rows * cols)
-                    };
-                    self.solver
-                        .solve_many_f32_in_place(MatMut::from_column_major_slice_mut(
-                            data, rows, cols,
-                        ))?;
-                }
-            }
+        // a [nb, V, C] copy, solved in place (see `solve_channels`)
+        let mut buf = Tensor::empty([nb, v, c], (work, Device::Cpu));
+        buf.copy_(&b.reshape([nb, v, c]));
+        let (items, rows, width) = (nb as usize, v as usize, c as usize);
+        if work == Kind::Double {
+            let data = SyncPtr(buf.data_ptr() as *mut f64);
+            solve_channels(self.solver.factor(), data, items, rows, width)?;
+        } else {
+            let data = SyncPtr(buf.data_ptr() as *mut f32);
+            solve_channels(self.solver.factor_f32(), data, items, rows, width)?;
         }
-        let out = buf.transpose(1, 2).contiguous().reshape(s.as_slice());
+        let out = buf.reshape(s.as_slice());
         Ok(if kind != work || device != Device::Cpu {
             out.to_kind(kind).to_device(device)
         } else {

@@ -576,6 +576,25 @@ impl<T: Real> CholeskyFactor<T> {
         Ok(())
     }
 
+    /// Solves `A X = B` in place like [`CholeskyFactor::solve_in_place`],
+    /// but entirely on the calling thread (chunks of [`SOLVE_CHUNK`]
+    /// columns one after the other), for callers that run several solves
+    /// in parallel on a thread pool of their own. Row-major blocks (column
+    /// stride 1, e.g. a `[V, C]` signal with one right-hand side per
+    /// channel) are read and written one contiguous row at a time. Each
+    /// column's result is the same as with [`CholeskyFactor::solve_in_place`]
+    /// (columns are solved independently, in the same order of operations).
+    ///
+    /// Errors: [`SolverError::SizeMismatch`], [`SolverError::NonFinite`]
+    /// (`rhs` is left untouched on error).
+    pub fn solve_in_place_sequential(&self, rhs: MatMut<'_, T>) -> Result<()> {
+        check_block(rhs.rb(), self.dim(), "right-hand side")?;
+        if self.dim() > 0 {
+            self.solve_chunk(rhs);
+        }
+        Ok(())
+    }
+
     /// Solve without input validation (rows already checked by the caller).
     pub(crate) fn solve_in_place_unchecked(&self, rhs: MatMut<'_, T>) {
         let k = rhs.ncols();
@@ -666,7 +685,17 @@ impl<T: Real> CholeskyFactor<T> {
         let cols: Option<Vec<&[T]>> = (0..k)
             .map(|j| rhs.rb().col(j).try_as_col_major().map(|c| c.as_slice()))
             .collect();
+        let row_major = k > 1 && rhs.col_stride() == 1;
         match cols {
+            _ if row_major => {
+                for (o, &p) in inv.iter().enumerate() {
+                    let row = &mut panel[p].0;
+                    if let Some(src) = rhs.rb().row(o).try_as_row_major() {
+                        row[..k].copy_from_slice(src.as_slice());
+                    }
+                    row[k..].fill(zero);
+                }
+            }
             Some(cols) => {
                 for (o, &p) in inv.iter().enumerate() {
                     let row = &mut panel[p].0;
@@ -697,6 +726,15 @@ impl<T: Real> CholeskyFactor<T> {
             16 => kernel::solve_panel::<T, K, 8, 16>(isa, &sn, v, &mut panel),
             _ if single => kernel::solve_panel::<T, K, 16, 32>(isa, &sn, v, &mut panel),
             _ => kernel::solve_panel::<T, K, 8, 32>(isa, &sn, v, &mut panel),
+        }
+        if row_major {
+            for (o, &p) in inv.iter().enumerate() {
+                if let Some(dst) = rhs.rb_mut().row_mut(o).try_as_row_major_mut() {
+                    dst.as_slice_mut().copy_from_slice(&panel[p].0[..k]);
+                }
+            }
+            self.give_back_panel(panel);
+            return;
         }
         let mut cols: Vec<&mut [T]> = rhs
             .rb_mut()

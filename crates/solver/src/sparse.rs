@@ -77,16 +77,30 @@ pub(crate) fn check_block<T: Copy + Into<f64>>(
             found: b.nrows(),
         });
     }
-    for j in 0..b.ncols() {
+    let bad = |i: usize, j: usize| -> Result<()> {
+        let v: f64 = b[(i, j)].into();
+        if v.is_finite() {
+            Ok(())
+        } else {
+            Err(SolverError::NonFinite {
+                what,
+                row: i,
+                col: j,
+                value: v,
+            })
+        }
+    };
+    // walk the block in memory order (rows first for a row-major block)
+    if b.col_stride() == 1 && b.row_stride() != 1 {
         for i in 0..n {
-            let v: f64 = b[(i, j)].into();
-            if !v.is_finite() {
-                return Err(SolverError::NonFinite {
-                    what,
-                    row: i,
-                    col: j,
-                    value: v,
-                });
+            for j in 0..b.ncols() {
+                bad(i, j)?;
+            }
+        }
+    } else {
+        for j in 0..b.ncols() {
+            for i in 0..n {
+                bad(i, j)?;
             }
         }
     }

@@ -413,3 +413,66 @@ fn parallel_factorization_matches_the_sequential_one_bit_for_bit() {
         );
     }
 }
+
+#[test]
+fn sequential_solves_of_row_major_blocks_match_the_parallel_solve() {
+    let (l, m) = common::torus_operators(900);
+    let n = l.nrows();
+    let a = {
+        let mut t: Vec<_> = l
+            .triplet_iter()
+            .map(|e| Triplet::new(e.row, e.col, *e.val))
+            .collect();
+        t.extend(m.iter().enumerate().map(|(i, &mi)| Triplet::new(i, i, mi)));
+        SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &t).expect("valid")
+    };
+    let factor = CholeskyFactor::new(a.as_ref()).expect("SPD");
+    // 45 columns: one full chunk of SOLVE_CHUNK and a narrower one
+    let b = rhs(n, 45, 7);
+    let expected = factor.solve_many(b.as_ref()).expect("solve");
+    // the same block stored row-major (a [V, C] signal), solved in place
+    let mut rows: Vec<f64> = (0..n)
+        .flat_map(|i| (0..45).map(move |j| (i, j)))
+        .map(|(i, j)| b[(i, j)])
+        .collect();
+    let view = faer::MatMut::from_row_major_slice_mut(&mut rows, n, 45);
+    factor.solve_in_place_sequential(view).expect("solve");
+    for i in 0..n {
+        for j in 0..45 {
+            assert_eq!(
+                rows[i * 45 + j].to_bits(),
+                expected[(i, j)].to_bits(),
+                "({i}, {j})"
+            );
+        }
+    }
+    // a column-major block through the same entry point
+    let mut cm = b.clone();
+    factor
+        .solve_in_place_sequential(cm.as_mut())
+        .expect("solve");
+    assert!((&cm - &expected).norm_max() == 0.0);
+    // a non-finite entry is reported at its row and column, nothing is written
+    let mut bad: Vec<f64> = (0..n * 45).map(|i| i as f64).collect();
+    bad[10 * 45 + 33] = f64::NAN;
+    let before = bad.clone();
+    let err = factor
+        .solve_in_place_sequential(faer::MatMut::from_row_major_slice_mut(&mut bad, n, 45))
+        .expect_err("NaN");
+    assert!(
+        matches!(
+            err,
+            SolverError::NonFinite {
+                row: 10,
+                col: 33,
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    assert!(
+        bad.iter()
+            .zip(&before)
+            .all(|(x, y)| x.to_bits() == y.to_bits())
+    );
+}
