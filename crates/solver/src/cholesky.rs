@@ -690,8 +690,9 @@ impl<T: Real> CholeskyFactor<T> {
             _ if row_major => {
                 for (o, &p) in inv.iter().enumerate() {
                     let row = &mut panel[p].0;
-                    if let Some(src) = rhs.rb().row(o).try_as_row_major() {
-                        row[..k].copy_from_slice(src.as_slice());
+                    match rhs.rb().row(o).try_as_row_major() {
+                        Some(src) => row[..k].copy_from_slice(src.as_slice()),
+                        None => (0..k).for_each(|j| row[j] = rhs[(o, j)]),
                     }
                     row[k..].fill(zero);
                 }
@@ -729,8 +730,9 @@ impl<T: Real> CholeskyFactor<T> {
         }
         if row_major {
             for (o, &p) in inv.iter().enumerate() {
-                if let Some(dst) = rhs.rb_mut().row_mut(o).try_as_row_major_mut() {
-                    dst.as_slice_mut().copy_from_slice(&panel[p].0[..k]);
+                match rhs.rb_mut().row_mut(o).try_as_row_major_mut() {
+                    Some(dst) => dst.as_slice_mut().copy_from_slice(&panel[p].0[..k]),
+                    None => (0..k).for_each(|j| rhs[(o, j)] = panel[p].0[j]),
                 }
             }
             self.give_back_panel(panel);
