@@ -32,7 +32,44 @@ fn main() {
     mfm_net::runtime::tune_allocator();
     let cli = Cli::parse();
     if let Err(e) = commands::run(cli.command) {
-        eprintln!("mfm: error: {e:#}");
+        eprintln!("mfm: error: {}", one_line(&e));
         std::process::exit(1);
+    }
+}
+
+/// The error and its causes on one line, `outer: inner: ...`, leaving out a
+/// cause whose text an outer message already contains (library errors such
+/// as `path: io error` both show and return their source).
+fn one_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
+}
+
+#[cfg(test)]
+mod tests {
+    use super::one_line;
+
+    #[test]
+    fn a_cause_already_in_its_wrapper_is_printed_once() {
+        let io = std::io::Error::new(std::io::ErrorKind::NotFound, "No such file");
+        let e = anyhow::Error::new(mfm_fm::FmError::io("/d/manifest.json", io))
+            .context("loading the dataset");
+        assert_eq!(
+            one_line(&e),
+            "loading the dataset: /d/manifest.json: No such file"
+        );
+        // causes that are not repeated all appear, outermost first
+        let e = anyhow::anyhow!("inner").context("middle").context("outer");
+        assert_eq!(one_line(&e), "outer: middle: inner");
     }
 }
