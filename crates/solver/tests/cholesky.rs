@@ -24,6 +24,22 @@ fn symmetric(n: usize, lower: &[(usize, usize, f64)]) -> SparseColMat<usize, f64
     SparseColMat::try_new_from_triplets(n, n, &t).expect("valid triplets")
 }
 
+/// `L + tau diag(m)` assembled from triplets (independently of the
+/// solver's own assembly).
+fn screened(l: &SparseColMat<usize, f64>, m: &[f64], tau: f64) -> SparseColMat<usize, f64> {
+    let n = l.nrows();
+    let mut t: Vec<_> = l
+        .triplet_iter()
+        .map(|e| Triplet::new(e.row, e.col, *e.val))
+        .collect();
+    t.extend(
+        m.iter()
+            .enumerate()
+            .map(|(i, &mi)| Triplet::new(i, i, tau * mi)),
+    );
+    SparseColMat::try_new_from_triplets(n, n, &t).expect("valid triplets")
+}
+
 /// Relative residual `||A X - B||_F / ||B||_F` (full symmetric `A`).
 fn rel_residual(a: &SparseColMat<usize, f64>, x: MatRef<'_, f64>, b: MatRef<'_, f64>) -> f64 {
     let ax = a * x;
@@ -123,18 +139,7 @@ fn factor_and_analysis_are_send_and_sync() {
 fn parallel_solves_from_many_threads_are_bit_identical_to_serial() {
     let (l, m) = common::torus_operators(2000);
     let n = l.nrows();
-    let a = {
-        let mut t: Vec<_> = l
-            .triplet_iter()
-            .map(|e| Triplet::new(e.row, e.col, *e.val))
-            .collect();
-        t.extend(
-            m.iter()
-                .enumerate()
-                .map(|(i, &mi)| Triplet::new(i, i, 10.0 * mi)),
-        );
-        SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &t).expect("valid")
-    };
+    let a = screened(&l, &m, 10.0);
     let factor = Arc::new(CholeskyFactor::new(a.as_ref()).expect("SPD"));
     let blocks: Vec<Mat<f64>> = (0..8).map(|s| rhs(n, 5 + 9 * s, s as u64)).collect();
     let serial: Vec<Mat<f64>> = blocks
@@ -377,16 +382,7 @@ fn parallel_factorization_matches_the_sequential_one_bit_for_bit() {
     // sequential one
     let (l, m) = common::torus_operators(12_000);
     let n = l.nrows();
-    let mut t: Vec<_> = l
-        .triplet_iter()
-        .map(|e| Triplet::new(e.row, e.col, *e.val))
-        .collect();
-    t.extend(
-        m.iter()
-            .enumerate()
-            .map(|(i, &mi)| Triplet::new(i, i, 100.0 * mi)),
-    );
-    let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &t).expect("valid");
+    let a = screened(&l, &m, 100.0);
     let b = rhs(n, 8, 5);
     let run = |threads: usize, parallel: bool| {
         let opts = FactorOptions {
@@ -418,14 +414,7 @@ fn parallel_factorization_matches_the_sequential_one_bit_for_bit() {
 fn sequential_solves_of_row_major_blocks_match_the_parallel_solve() {
     let (l, m) = common::torus_operators(900);
     let n = l.nrows();
-    let a = {
-        let mut t: Vec<_> = l
-            .triplet_iter()
-            .map(|e| Triplet::new(e.row, e.col, *e.val))
-            .collect();
-        t.extend(m.iter().enumerate().map(|(i, &mi)| Triplet::new(i, i, mi)));
-        SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &t).expect("valid")
-    };
+    let a = screened(&l, &m, 1.0);
     let factor = CholeskyFactor::new(a.as_ref()).expect("SPD");
     // 45 columns: one full chunk of SOLVE_CHUNK and a narrower one
     let b = rhs(n, 45, 7);
