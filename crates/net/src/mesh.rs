@@ -162,79 +162,55 @@ fn prefetch<T>(data: &[T], len: usize) {
     let _ = (data, len);
 }
 
-/// The loops of [`FaceOperator`]'s CPU kernels over a range of output rows
-/// (compiled twice: portable, and for AVX2 + FMA chosen at run time).
-struct GatherKernel<'a> {
+/// One run of [`FaceOperator`]'s CPU kernel: `A x` over face items
+/// `b F + f` or, with `adjoint`, `A^T y` over vertex items `b V + v`,
+/// written to `out`. Its loops over a range of items are compiled twice
+/// (portable, and for AVX2 + FMA chosen at run time).
+struct GatherKernel<'a, T> {
     faces: &'a [[u32; 3]],
     incidence: &'a Incidence,
     rows: usize,
     num_vertices: usize,
     c: usize,
+    adjoint: bool,
+    input: &'a [T],
+    /// Per-face coefficients (forward) or per-incidence ones (adjoint).
+    coef: &'a [T],
+    out: SyncPtr<T>,
 }
 
-impl GatherKernel<'_> {
-    /// `A x` for face items `begin..end` (`b F + f`) or, with `adjoint`,
-    /// `A^T y` for vertex items `begin..end` (`b V + v`), written to `out`.
-    fn dispatch<T: Scalar>(
-        &self,
-        adjoint: bool,
-        input: &[T],
-        coef: &[T],
-        out: SyncPtr<T>,
-        begin: usize,
-        end: usize,
-    ) {
+impl<T: Scalar> GatherKernel<'_, T> {
+    /// Items `begin..end`, with the AVX2 + FMA loops when the CPU has them.
+    fn dispatch(&self, begin: usize, end: usize) {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
         {
             // SAFETY: the CPU supports AVX2 and FMA (checked above).
-            unsafe { self.run_avx2(adjoint, input, coef, out, begin, end) };
+            unsafe { self.run_avx2(begin, end) };
             return;
         }
-        self.run(adjoint, input, coef, out, begin, end);
+        self.run(begin, end);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn run_avx2<T: Scalar>(
-        &self,
-        adjoint: bool,
-        input: &[T],
-        coef: &[T],
-        out: SyncPtr<T>,
-        begin: usize,
-        end: usize,
-    ) {
-        self.run(adjoint, input, coef, out, begin, end);
+    unsafe fn run_avx2(&self, begin: usize, end: usize) {
+        self.run(begin, end);
     }
 
     #[inline(always)]
-    fn run<T: Scalar>(
-        &self,
-        adjoint: bool,
-        input: &[T],
-        coef: &[T],
-        out: SyncPtr<T>,
-        begin: usize,
-        end: usize,
-    ) {
-        if adjoint {
-            self.adjoint_rows(input, coef, out, begin, end);
+    fn run(&self, begin: usize, end: usize) {
+        if self.adjoint {
+            self.adjoint_rows(begin, end);
         } else {
-            self.forward_rows(input, coef, out, begin, end);
+            self.forward_rows(begin, end);
         }
     }
 
     #[inline(always)]
-    fn forward_rows<T: Scalar>(
-        &self,
-        x: &[T],
-        coef: &[T],
-        out: SyncPtr<T>,
-        begin: usize,
-        end: usize,
-    ) {
+    fn forward_rows(&self, begin: usize, end: usize) {
         let (v, f, rows, c) = (self.num_vertices, self.faces.len(), self.rows, self.c);
+        let (x, coef, out) = (self.input, self.coef, self.out);
         for idx in begin..end {
             let (b, fi) = (idx / f, idx % f);
             let xb = &x[b * v * c..(b + 1) * v * c];
@@ -260,15 +236,9 @@ impl GatherKernel<'_> {
     }
 
     #[inline(always)]
-    fn adjoint_rows<T: Scalar>(
-        &self,
-        y: &[T],
-        adj: &[T],
-        out: SyncPtr<T>,
-        begin: usize,
-        end: usize,
-    ) {
+    fn adjoint_rows(&self, begin: usize, end: usize) {
         let (v, f, rows, c) = (self.num_vertices, self.faces.len(), self.rows, self.c);
+        let (y, adj, out) = (self.input, self.coef, self.out);
         let inc = self.incidence;
         let block = rows * c;
         for idx in begin..end {
@@ -456,32 +426,34 @@ impl FaceOperator {
         Ok(out.reshape(shape.as_slice()))
     }
 
-    fn forward_kernel<T: Scalar>(&self, x: &[T], out: &mut [T], nb: usize, c: usize, coef: &[T]) {
+    /// `A x` (or with `adjoint`, `A^T x`) for `nb` items of `c` channels;
+    /// `coef` the per-face (per-incidence) coefficients.
+    fn gather<T: Scalar>(
+        &self,
+        adjoint: bool,
+        input: &[T],
+        out: &mut [T],
+        nb: usize,
+        c: usize,
+        coef: &[T],
+    ) {
         let k = GatherKernel {
             faces: &self.faces[..],
             incidence: &self.incidence,
             rows: self.rows,
             num_vertices: self.num_vertices,
             c,
+            adjoint,
+            input,
+            coef,
+            out: SyncPtr(out.as_mut_ptr()),
         };
-        let optr = SyncPtr(out.as_mut_ptr());
-        parallel_for(nb * k.faces.len(), 256, &|begin, end| {
-            k.dispatch(false, x, coef, optr, begin, end)
-        });
-    }
-
-    fn adjoint_kernel<T: Scalar>(&self, y: &[T], out: &mut [T], nb: usize, c: usize, adj: &[T]) {
-        let k = GatherKernel {
-            faces: &self.faces[..],
-            incidence: &self.incidence,
-            rows: self.rows,
-            num_vertices: self.num_vertices,
-            c,
+        let (items, grain) = if adjoint {
+            (nb * self.num_vertices, 128)
+        } else {
+            (nb * self.faces.len(), 256)
         };
-        let optr = SyncPtr(out.as_mut_ptr());
-        parallel_for(nb * self.num_vertices, 128, &|begin, end| {
-            k.dispatch(true, y, adj, optr, begin, end)
-        });
+        parallel_for(items, grain, &|begin, end| k.dispatch(begin, end));
     }
 
     /// Runs a kernel on a CPU copy of `x` with the layout `[nb, n_in, c]`.
@@ -508,11 +480,8 @@ impl FaceOperator {
                         std::slice::from_raw_parts_mut(out.data_ptr() as *mut f64, n_out),
                     )
                 };
-                if adjoint {
-                    self.adjoint_kernel(xs, os, nb as usize, c as usize, &self.adj64);
-                } else {
-                    self.forward_kernel(xs, os, nb as usize, c as usize, &self.coef64);
-                }
+                let coef = if adjoint { &self.adj64 } else { &self.coef64 };
+                self.gather(adjoint, xs, os, nb as usize, c as usize, coef);
             }
             Kind::Float => {
                 // SAFETY: as above.
@@ -522,11 +491,8 @@ impl FaceOperator {
                         std::slice::from_raw_parts_mut(out.data_ptr() as *mut f32, n_out),
                     )
                 };
-                if adjoint {
-                    self.adjoint_kernel(xs, os, nb as usize, c as usize, &self.adj32);
-                } else {
-                    self.forward_kernel(xs, os, nb as usize, c as usize, &self.coef32);
-                }
+                let coef = if adjoint { &self.adj32 } else { &self.coef32 };
+                self.gather(adjoint, xs, os, nb as usize, c as usize, coef);
             }
             k => {
                 return Err(NetError::Kind {
