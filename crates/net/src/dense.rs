@@ -120,6 +120,32 @@ fn forward_kind<T: Real>(x: &Tensor, w: &Tensor, out: &Tensor, n: usize, k: usiz
     gemm_rows(xs, ws, Ptr(out.data_ptr() as *mut T), n, k, o, true);
 }
 
+/// `(dX = G W, dW = G^T X)` of `Y = X W^T` for contiguous CPU tensors of
+/// type `T` (`X: [n, k]`, `W: [o, k]`, `G: [n, o]`).
+fn backward_kind<T>(
+    x: &Tensor,
+    w: &Tensor,
+    g: &Tensor,
+    n: usize,
+    k: usize,
+    o: usize,
+) -> (Tensor, Tensor)
+where
+    T: Real + tch::kind::Element,
+{
+    let grad_x = Tensor::empty(x.size().as_slice(), (x.kind(), Device::Cpu));
+    // SAFETY: contiguous CPU tensors of type T.
+    let (xs, ws, gs) = unsafe { (slice::<T>(x), slice::<T>(w), slice::<T>(g)) };
+    gemm_rows(gs, ws, Ptr(grad_x.data_ptr() as *mut T), n, o, k, false);
+    let grad_w = if o * k <= FAER_WEIGHT_GRADIENT_MAX {
+        Tensor::from_slice(&weight_gradient(xs, gs, n, k, o)).reshape([o as i64, k as i64])
+    } else {
+        let (ni, oi, ki) = (n as i64, o as i64, k as i64);
+        g.reshape([ni, oi]).tr().mm(&x.reshape([ni, ki]))
+    };
+    (grad_x, grad_w)
+}
+
 impl CustomFunction for Linear {
     fn name(&self) -> &str {
         "linear"
@@ -162,36 +188,9 @@ impl CustomFunction for Linear {
         let g = grad_outputs[0].contiguous();
         let (n, k) = rows_of(x);
         let o = w.size()[0] as usize;
-        let grad_x = Tensor::empty(x.size().as_slice(), (x.kind(), Device::Cpu));
-        match x.kind() {
-            Kind::Double => {
-                // SAFETY: contiguous CPU tensors of type f64.
-                let (gs, ws) = unsafe { (slice::<f64>(&g), slice::<f64>(w)) };
-                gemm_rows(gs, ws, Ptr(grad_x.data_ptr() as *mut f64), n, o, k, false);
-            }
-            _ => {
-                // SAFETY: contiguous CPU tensors of type f32.
-                let (gs, ws) = unsafe { (slice::<f32>(&g), slice::<f32>(w)) };
-                gemm_rows(gs, ws, Ptr(grad_x.data_ptr() as *mut f32), n, o, k, false);
-            }
-        }
-        let grad_w = if o * k <= FAER_WEIGHT_GRADIENT_MAX {
-            let gw = match x.kind() {
-                Kind::Double => {
-                    // SAFETY: contiguous CPU tensors of type f64.
-                    let (gs, xs) = unsafe { (slice::<f64>(&g), slice::<f64>(x)) };
-                    Tensor::from_slice(&weight_gradient(xs, gs, n, k, o))
-                }
-                _ => {
-                    // SAFETY: contiguous CPU tensors of type f32.
-                    let (gs, xs) = unsafe { (slice::<f32>(&g), slice::<f32>(x)) };
-                    Tensor::from_slice(&weight_gradient(xs, gs, n, k, o))
-                }
-            };
-            gw.reshape([o as i64, k as i64])
-        } else {
-            let (ni, oi, ki) = (n as i64, o as i64, k as i64);
-            g.reshape([ni, oi]).tr().mm(&x.reshape([ni, ki]))
+        let (grad_x, grad_w) = match x.kind() {
+            Kind::Double => backward_kind::<f64>(x, w, &g, n, k, o),
+            _ => backward_kind::<f32>(x, w, &g, n, k, o),
         };
         let mut grads = vec![Some(grad_x), Some(grad_w)];
         if self.has_bias {
