@@ -211,60 +211,82 @@ fn table(refs: &[&Reference], times: &[[Vec<RunTimes>; 2]], bench: &NetBench<'_>
         bench.mesh, bench.threads, bench.rounds, bench.steps
     );
     let base = bench.baseline.is_some();
-    let mut header = "| preset | batch | step (s) |".to_owned();
-    let mut rule = "|---|---|---|".to_owned();
-    if base {
-        header.push_str(" baseline step (s) | step / baseline |");
+    let mut header = "| preset | batch |".to_owned();
+    let mut rule = "|---|---|".to_owned();
+    for m in &METRICS {
+        let (name, unit) = (m.name, m.unit);
+        header.push_str(&format!(" {name} ({unit}) |"));
+        rule.push_str("---|");
+        if base {
+            header.push_str(&format!(" baseline {name} ({unit}) | {name} / baseline |"));
+            rule.push_str("---|---|");
+        }
+        header.push_str(&format!(" reference / {name} | goal |"));
         rule.push_str("---|---|");
     }
-    header.push_str(" reference / step | goal | inference (ms) |");
-    rule.push_str("---|---|---|");
-    if base {
-        header.push_str(" baseline inference (ms) | inference / baseline |");
-        rule.push_str("---|---|");
-    }
-    header.push_str(" reference / inference | goal |");
-    rule.push_str("---|---|");
     let _ = writeln!(s, "{header}\n{rule}");
     for (r, [ours, theirs]) in refs.iter().zip(times) {
-        let step: Vec<f64> = ours.iter().map(|t| t.step).collect();
-        let inf: Vec<f64> = ours.iter().map(|t| t.inference).collect();
-        let bstep: Vec<f64> = theirs.iter().map(|t| t.step).collect();
-        let binf: Vec<f64> = theirs.iter().map(|t| t.inference).collect();
-        let mut row = format!("| {} | {} | {} |", r.preset, r.batch, spread(&step, 1.0, 3));
-        if base {
+        let mut row = format!("| {} | {} |", r.preset, r.batch);
+        for m in &METRICS {
+            let ours: Vec<f64> = ours.iter().map(m.of_run).collect();
+            let theirs: Vec<f64> = theirs.iter().map(m.of_run).collect();
+            let _ = write!(row, " {} |", spread(&ours, m.scale, m.decimals));
+            if base {
+                let _ = write!(
+                    row,
+                    " {} | {:.3} |",
+                    spread(&theirs, m.scale, m.decimals),
+                    median(&paired_ratios(&theirs, &ours))
+                );
+            }
+            let reference = (m.of_reference)(r);
             let _ = write!(
                 row,
-                " {} | {:.3} |",
-                spread(&bstep, 1.0, 3),
-                median(&paired_ratios(&bstep, &step))
+                " {:.2}x | {:.d$} {} |",
+                reference / median(&ours),
+                reference / 3.0 * m.scale,
+                m.unit,
+                d = m.goal_decimals
             );
         }
-        let _ = write!(
-            row,
-            " {:.2}x | {:.3} s | {} |",
-            r.step / median(&step),
-            r.step / 3.0,
-            spread(&inf, 1e3, 1)
-        );
-        if base {
-            let _ = write!(
-                row,
-                " {} | {:.3} |",
-                spread(&binf, 1e3, 1),
-                median(&paired_ratios(&binf, &inf))
-            );
-        }
-        let _ = write!(
-            row,
-            " {:.2}x | {:.0} ms |",
-            r.inference / median(&inf),
-            r.inference / 3.0 * 1e3
-        );
         let _ = writeln!(s, "{row}");
     }
     s
 }
+
+/// A measured quantity of the table: how it is read from a run and from
+/// the reference, and how it is printed.
+struct Metric {
+    name: &'static str,
+    unit: &'static str,
+    /// Seconds to `unit`.
+    scale: f64,
+    decimals: usize,
+    goal_decimals: usize,
+    of_run: fn(&RunTimes) -> f64,
+    of_reference: fn(&Reference) -> f64,
+}
+
+const METRICS: [Metric; 2] = [
+    Metric {
+        name: "step",
+        unit: "s",
+        scale: 1.0,
+        decimals: 3,
+        goal_decimals: 3,
+        of_run: |t| t.step,
+        of_reference: |r| r.step,
+    },
+    Metric {
+        name: "inference",
+        unit: "ms",
+        scale: 1e3,
+        decimals: 1,
+        goal_decimals: 0,
+        of_run: |t| t.inference,
+        of_reference: |r| r.inference,
+    },
+];
 
 /// Where the table goes.
 pub fn output_dir() -> PathBuf {
