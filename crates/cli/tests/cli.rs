@@ -515,15 +515,7 @@ fn gmm_dataset_train_sample_eval_end_to_end() {
     let log = std::fs::read_to_string(dir.path().join("run/train_log.csv")).unwrap();
     assert_eq!(log.lines().count(), 5, "header + 4 rows:\n{log}");
     // Training again into a finished run folder is refused.
-    let o = mfm(&[
-        "train",
-        "--config",
-        &p("run.toml"),
-        "--dataset",
-        &p("data/train"),
-        "--out",
-        &p("run"),
-    ]);
+    let o = train_with_config(dir.path(), config);
     assert!(!o.status.success());
 
     // Sample on the reference's (non-uniform, finer) mesh.
