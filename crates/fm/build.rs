@@ -1,11 +1,16 @@
 //! Embeds an rpath to libtorch's library folder into this crate's binaries and
-//! tests, so they run without `LD_LIBRARY_PATH`. The folder comes from the net
-//! crate's build script (`DEP_MFM_NET_LIBTORCH_LIB`); see `crates/net/build.rs`.
+//! tests, so they run without `LD_LIBRARY_PATH`, and with a CUDA libtorch keeps
+//! `libtorch_cuda.so` linked. The folder comes from the net crate's build
+//! script (`DEP_MFM_NET_LIBTORCH_LIB`); see `crates/net/build.rs`.
+
+#[path = "../net/libtorch_link.rs"]
+mod libtorch_link;
 
 fn main() {
     println!("cargo:rerun-if-env-changed=DEP_MFM_NET_LIBTORCH_LIB");
+    println!("cargo:rerun-if-changed=../net/libtorch_link.rs");
     match std::env::var("DEP_MFM_NET_LIBTORCH_LIB") {
-        Ok(lib) => println!("cargo:rustc-link-arg=-Wl,-rpath,{lib}"),
+        Ok(lib) => libtorch_link::emit_link_args(&lib),
         Err(_) => panic!(
             "mfm-net did not report its libtorch folder (DEP_MFM_NET_LIBTORCH_LIB); \
              set LIBTORCH to the torch install (see `cargo xtask setup`)"

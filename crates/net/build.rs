@@ -1,5 +1,6 @@
 //! Embeds an rpath to libtorch's library folder into this crate's binaries and
-//! tests, passes the folder on to dependent crates, and compiles the C++ shim
+//! tests (and, with a CUDA libtorch, keeps `libtorch_cuda.so` linked; see
+//! `libtorch_link.rs`), passes the folder on to dependent crates, and compiles the C++ shim
 //! (`csrc/mfm_autograd.cpp`) that lets autograd call operations written in Rust.
 //!
 //! torch-sys reports the folder it linked against as `DEP_TCH_LIBTORCH_LIB`
@@ -15,17 +16,21 @@
 
 use std::path::PathBuf;
 
+#[path = "libtorch_link.rs"]
+mod libtorch_link;
+
 fn main() {
     println!("cargo:rerun-if-env-changed=DEP_TCH_LIBTORCH_LIB");
     println!("cargo:rerun-if-env-changed=LIBTORCH_CXX11_ABI");
     println!("cargo:rerun-if-changed=csrc/mfm_autograd.cpp");
+    println!("cargo:rerun-if-changed=libtorch_link.rs");
     let Ok(lib) = std::env::var("DEP_TCH_LIBTORCH_LIB") else {
         panic!(
             "torch-sys did not report its libtorch folder (DEP_TCH_LIBTORCH_LIB); \
              set LIBTORCH to the torch install (see `cargo xtask setup`)"
         );
     };
-    println!("cargo:rustc-link-arg=-Wl,-rpath,{lib}");
+    libtorch_link::emit_link_args(&lib);
     println!("cargo:libtorch_lib={lib}");
 
     let root = PathBuf::from(&lib).join("..");

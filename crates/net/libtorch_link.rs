@@ -1,0 +1,26 @@
+//! Link settings shared by the build scripts of every crate whose binaries or
+//! tests link libtorch (net, fm, cli): included with `#[path]`, since link
+//! arguments printed by a build script reach only that package's own targets.
+
+use std::path::Path;
+
+/// Prints the link arguments for binaries and tests linking the libtorch in
+/// `lib` (its library folder):
+///
+/// - an rpath to `lib`, so they run without `LD_LIBRARY_PATH`;
+/// - with a CUDA build of libtorch (`libtorch_cuda.so` in `lib`), that
+///   library as a needed entry even though no symbol of it is referenced.
+///   Rust links with `--as-needed`, which would drop it; libtorch then never
+///   registers its CUDA backend and `tch::Cuda::is_available()` is false on a
+///   machine with a GPU. `--push-state`/`--pop-state` keep the setting to this
+///   one library.
+pub fn emit_link_args(lib: &str) {
+    println!("cargo:rustc-link-arg=-Wl,-rpath,{lib}");
+    let cuda = Path::new(lib).join("libtorch_cuda.so");
+    if cuda.is_file() {
+        println!(
+            "cargo:rustc-link-arg=-Wl,--push-state,--no-as-needed,{},--pop-state",
+            cuda.display()
+        );
+    }
+}
