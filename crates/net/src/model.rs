@@ -339,10 +339,14 @@ pub struct PoissonNet {
 impl PoissonNet {
     /// Builds a freshly initialized network on `device` (`f32` parameters).
     ///
+    /// The parameters are drawn on the CPU, from libtorch's CPU generator
+    /// (`tch::manual_seed`), and then moved to `device`: a seed gives the same
+    /// initial network on every device (CUDA's generator draws other numbers).
+    ///
     /// Errors: [`NetError::Config`] for an invalid configuration.
     pub fn new(config: &PoissonNetConfig, device: Device) -> Result<Self> {
         config.validate()?;
-        let vs = nn::VarStore::new(device);
+        let mut vs = nn::VarStore::new(Device::Cpu);
         let root = vs.root();
         let w = config.width;
         let proj_in = linear(&root / "proj_in", config.in_channels, w);
@@ -371,6 +375,9 @@ impl PoissonNet {
                 Head::Linear(linear(&root / "head" / "linear", w, config.out_channels))
             }
         };
+        if device != Device::Cpu {
+            vs.set_device(device);
+        }
         Ok(Self {
             config: config.clone(),
             vs,

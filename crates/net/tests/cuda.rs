@@ -37,6 +37,20 @@ fn cuda_forward_and_gradients_match_cpu() {
     cpu_net.save(&path).unwrap();
     let mut gpu_net = PoissonNet::load(&path, gpu).unwrap();
     gpu_net.set_kind(Kind::Double);
+    // the same seed initializes the same network on either device
+    tch::manual_seed(9);
+    let fresh = PoissonNet::new(&cfg, gpu).unwrap();
+    assert_eq!(fresh.device(), gpu);
+    let first = cpu_net.var_store().variables();
+    for (name, t) in fresh.var_store().variables() {
+        assert_eq!(t.device(), gpu, "{name}");
+        assert!(
+            t.to_device(Device::Cpu)
+                .to_kind(Kind::Double)
+                .equal(&first[&name]),
+            "{name} initialized differently on the GPU"
+        );
+    }
     let v = mt.num_vertices() as i64;
     let x = Tensor::randn([2, v, 3], (Kind::Double, Device::Cpu));
     let e = Tensor::randn([2, v, 4], (Kind::Double, Device::Cpu));
