@@ -30,6 +30,12 @@
 //! Everything runs on the CPU; with a CUDA libtorch and a GPU the network and
 //! its tensors can live on the GPU ([`runtime::TorchRuntime::preferred_device`])
 //! while the sparse solves stay on the CPU (tensors move for each solve).
+//! [`PoissonNet::new`] draws the parameters on the CPU and then moves them,
+//! so a seed gives the same network on either device. Binaries and tests of
+//! this workspace keep a CUDA libtorch's `libtorch_cuda.so` linked (see
+//! `crates/net/libtorch_link.rs`); a crate of your own that links this one
+//! needs the same link argument in its build script, or libtorch will not see
+//! the GPU.
 //! Parameters are `f32` by default; [`PoissonNet::set_kind`] switches to `f64`
 //! (solves then use the `f64` factor).
 //!
