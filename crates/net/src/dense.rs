@@ -85,7 +85,7 @@ fn gemm_rows<T: Real>(
 }
 
 /// Largest weight (`C_out * C_in` entries) whose gradient [`linear`]
-/// computes with faer ([`weight_gradient`]); larger ones use torch's `mm`
+/// computes with faer (`weight_gradient`); larger ones use torch's `mm`
 /// (MKL). The weight gradient is a long reduction over all rows: for the
 /// paper preset's `128 x 384` and `256 x 128` weights MKL was ~4% faster on
 /// the whole step (65-70 vs 48 GFLOPS per core), while for the small

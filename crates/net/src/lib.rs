@@ -49,6 +49,12 @@
 //!   instead of four (Gauss's form, [`dense::complex_linear`]), forward and
 //!   in both backward products: the paper step's dense work drops to ~444
 //!   GFLOP;
+//! - a block's last complex layer runs after the divergence, on vertices:
+//!   `div(W g) = div(g) Wr^T + div(i g) Wi^T`
+//!   ([`model::ComplexLinear::forward_divergence`], with both divergences in
+//!   one pass, [`MeshTensors::paired_divergence`]): one `[V, 2W] x [2W, W]`
+//!   product instead of three `[F, W] x [W, W]` ones, ~390 GFLOP per paper
+//!   step;
 //! - dense layers use faer's GEMM ([`dense`]), ~15-25% faster per core than
 //!   the MKL inside the torch wheel on the AMD benchmark machine;
 //! - the modulation and the magnitude nonlinearity are single-pass fused

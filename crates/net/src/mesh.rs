@@ -84,6 +84,7 @@ trait Scalar:
     + Default
     + std::ops::Mul<Output = Self>
     + std::ops::Add<Output = Self>
+    + std::ops::Sub<Output = Self>
     + std::ops::AddAssign
     + 'static
 {
@@ -162,6 +163,25 @@ fn prefetch<T>(data: &[T], len: usize) {
     let _ = (data, len);
 }
 
+/// Which map a [`GatherKernel`] run computes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum GatherMode {
+    /// `A x`, face items.
+    Forward,
+    /// `A^T y`, vertex items.
+    Adjoint,
+    /// [`GatherKernel::forward_pair_rows`] (vertex rows of `2c` values).
+    PairedForward,
+    /// [`GatherKernel::adjoint_pair_rows`] (vertex rows of `2c` values).
+    PairedAdjoint,
+}
+
+impl GatherMode {
+    fn adjoint(self) -> bool {
+        matches!(self, Self::Adjoint | Self::PairedAdjoint)
+    }
+}
+
 /// One run of [`FaceOperator`]'s CPU kernel: `A x` over face items
 /// `b F + f` or, with `adjoint`, `A^T y` over vertex items `b V + v`,
 /// written to `out`. Its loops over a range of items are compiled twice
@@ -172,7 +192,9 @@ struct GatherKernel<'a, T> {
     rows: usize,
     num_vertices: usize,
     c: usize,
-    adjoint: bool,
+    /// The paired modes are [`ComplexDivergenceOp`]'s (`rows == 2`): vertex
+    /// rows hold `2c` values, `[p | q]`.
+    mode: GatherMode,
     input: &'a [T],
     /// Per-face coefficients (forward) or per-incidence ones (adjoint).
     coef: &'a [T],
@@ -200,10 +222,83 @@ impl<T: Scalar> GatherKernel<'_, T> {
 
     #[inline(always)]
     fn run(&self, begin: usize, end: usize) {
-        if self.adjoint {
-            self.adjoint_rows(begin, end);
-        } else {
-            self.forward_rows(begin, end);
+        match self.mode {
+            GatherMode::Forward => self.forward_rows(begin, end),
+            GatherMode::Adjoint => self.adjoint_rows(begin, end),
+            GatherMode::PairedForward => self.forward_pair_rows(begin, end),
+            GatherMode::PairedAdjoint => self.adjoint_pair_rows(begin, end),
+        }
+    }
+
+    /// Paired forward: vertex rows `[p | q]` (`2c` values) to the face rows
+    /// `(A p + A_rot q)`, where `A_rot` turns each face's coefficient rows
+    /// `(a0, a1)` into `(a1, -a0)`: row 0 gets `a0 p + a1 q`, row 1
+    /// `a1 p - a0 q`. The adjoint of [`GatherKernel::adjoint_pair_rows`].
+    #[inline(always)]
+    fn forward_pair_rows(&self, begin: usize, end: usize) {
+        let (v, f, c) = (self.num_vertices, self.faces.len(), self.c);
+        let (x, coef, out) = (self.input, self.coef, self.out);
+        let w = 2 * c;
+        for idx in begin..end {
+            let (b, fi) = (idx / f, idx % f);
+            let xb = &x[b * v * w..(b + 1) * v * w];
+            let [i0, i1, i2] = self.faces[fi].map(|i| i as usize);
+            let (p0, q0) = xb[i0 * w..i0 * w + w].split_at(c);
+            let (p1, q1) = xb[i1 * w..i1 * w + w].split_at(c);
+            let (p2, q2) = xb[i2 * w..i2 * w + w].split_at(c);
+            let a = &coef[fi * 6..fi * 6 + 3];
+            let d = &coef[fi * 6 + 3..fi * 6 + 6];
+            // SAFETY: rows 2 idx and 2 idx + 1 belong to this range only and
+            // are inside the output (nb F 2 rows of c).
+            let (o0, o1) = unsafe {
+                std::slice::from_raw_parts_mut(out.get().add(idx * 2 * c), 2 * c).split_at_mut(c)
+            };
+            let (a0, a1, a2) = (a[0], a[1], a[2]);
+            let (d0, d1, d2) = (d[0], d[1], d[2]);
+            let ps = p0.iter().zip(p1).zip(p2);
+            let qs = q0.iter().zip(q1).zip(q2);
+            for (((o0, o1), ((&pa, &pb), &pc)), ((&qa, &qb), &qc)) in
+                o0.iter_mut().zip(o1.iter_mut()).zip(ps).zip(qs)
+            {
+                *o0 = a0 * pa + a1 * pb + a2 * pc + (d0 * qa + d1 * qb + d2 * qc);
+                *o1 = d0 * pa + d1 * pb + d2 * pc - (a0 * qa + a1 * qb + a2 * qc);
+            }
+        }
+    }
+
+    /// Paired adjoint: face rows `(y0, y1)` to vertex rows `[p | q]` with
+    /// `p = A^T y` and `q = A_rot^T y` (per incidence with coefficients
+    /// `(w0, w1)`: `p += w0 y0 + w1 y1`, `q += w1 y0 - w0 y1`), reading each
+    /// face row once.
+    #[inline(always)]
+    fn adjoint_pair_rows(&self, begin: usize, end: usize) {
+        let (v, f, c) = (self.num_vertices, self.faces.len(), self.c);
+        let (y, adj, out) = (self.input, self.coef, self.out);
+        let inc = self.incidence;
+        let block = 2 * c;
+        for idx in begin..end {
+            let (b, vi) = (idx / v, idx % v);
+            let yb = &y[b * f * block..(b + 1) * f * block];
+            if vi + 1 < v {
+                for k in inc.ptr[vi + 1]..inc.ptr[vi + 2] {
+                    prefetch(&yb[inc.face[k] as usize * block..], block);
+                }
+            }
+            // SAFETY: row idx (2c values) belongs to this range only.
+            let (op, oq) = unsafe {
+                std::slice::from_raw_parts_mut(out.get().add(idx * 2 * c), 2 * c).split_at_mut(c)
+            };
+            op.fill(T::default());
+            oq.fill(T::default());
+            for k in inc.ptr[vi]..inc.ptr[vi + 1] {
+                let fi = inc.face[k] as usize;
+                let (w0, w1) = (adj[k * 2], adj[k * 2 + 1]);
+                let (y0, y1) = yb[fi * block..(fi + 1) * block].split_at(c);
+                for (((p, q), &a), &d) in op.iter_mut().zip(oq.iter_mut()).zip(y0).zip(y1) {
+                    *p = *p + w0 * a + w1 * d;
+                    *q = *q + w1 * a - w0 * d;
+                }
+            }
         }
     }
 
@@ -430,7 +525,7 @@ impl FaceOperator {
     /// `coef` the per-face (per-incidence) coefficients.
     fn gather<T: Scalar>(
         &self,
-        adjoint: bool,
+        mode: GatherMode,
         input: &[T],
         out: &mut [T],
         nb: usize,
@@ -443,12 +538,12 @@ impl FaceOperator {
             rows: self.rows,
             num_vertices: self.num_vertices,
             c,
-            adjoint,
+            mode,
             input,
             coef,
             out: SyncPtr(out.as_mut_ptr()),
         };
-        let (items, grain) = if adjoint {
+        let (items, grain) = if mode.adjoint() {
             (nb * self.num_vertices, 128)
         } else {
             (nb * self.faces.len(), 256)
@@ -456,21 +551,22 @@ impl FaceOperator {
         parallel_for(items, grain, &|begin, end| k.dispatch(begin, end));
     }
 
-    /// Runs a kernel on a CPU copy of `x` with the layout `[nb, n_in, c]`.
+    /// Runs a kernel on a CPU copy of `x` (`nb` items of `c` channels, or
+    /// in the paired mode `c` channels per face row and `2c` per vertex
+    /// row) into a new tensor of shape `out_shape`.
     fn run_kernel(
         &self,
         x: &Tensor,
-        out_rows: usize,
         out_shape: Vec<i64>,
         nb: i64,
         c: i64,
-        adjoint: bool,
+        mode: GatherMode,
     ) -> Result<Tensor> {
         let kind = x.kind();
         let x = x.contiguous();
         let out = Tensor::empty(out_shape.as_slice(), (kind, Device::Cpu));
         let n_in = x.numel();
-        let n_out = (nb as usize) * out_rows * (c as usize);
+        let n_out = out.numel();
         match kind {
             Kind::Double => {
                 // SAFETY: contiguous CPU tensors of the stated sizes and kind.
@@ -480,8 +576,12 @@ impl FaceOperator {
                         std::slice::from_raw_parts_mut(out.data_ptr() as *mut f64, n_out),
                     )
                 };
-                let coef = if adjoint { &self.adj64 } else { &self.coef64 };
-                self.gather(adjoint, xs, os, nb as usize, c as usize, coef);
+                let coef = if mode.adjoint() {
+                    &self.adj64
+                } else {
+                    &self.coef64
+                };
+                self.gather(mode, xs, os, nb as usize, c as usize, coef);
             }
             Kind::Float => {
                 // SAFETY: as above.
@@ -491,8 +591,12 @@ impl FaceOperator {
                         std::slice::from_raw_parts_mut(out.data_ptr() as *mut f32, n_out),
                     )
                 };
-                let coef = if adjoint { &self.adj32 } else { &self.coef32 };
-                self.gather(adjoint, xs, os, nb as usize, c as usize, coef);
+                let coef = if mode.adjoint() {
+                    &self.adj32
+                } else {
+                    &self.coef32
+                };
+                self.gather(mode, xs, os, nb as usize, c as usize, coef);
             }
             k => {
                 return Err(NetError::Kind {
@@ -518,7 +622,7 @@ impl LinearOperator for FaceOperator {
         let rows = self.num_faces() * self.rows;
         let mut shape = lead.clone();
         shape.extend([rows as i64, c]);
-        self.run_kernel(x, rows, shape, nb, c, false)
+        self.run_kernel(x, shape, nb, c, GatherMode::Forward)
     }
 
     fn apply_adjoint(&self, y: &Tensor) -> Result<Tensor> {
@@ -529,7 +633,63 @@ impl LinearOperator for FaceOperator {
         }
         let mut shape = lead.clone();
         shape.extend([self.num_vertices as i64, c]);
-        self.run_kernel(y, self.num_vertices, shape, nb, c, true)
+        self.run_kernel(y, shape, nb, c, GatherMode::Adjoint)
+    }
+}
+
+/// The weak divergence and the rotated weak divergence side by side, as the
+/// adjoint of a linear operator: `A^T y = [G^T A2 y | G^T A2 (i y)]`,
+/// `[..., 2F, C] -> [..., V, 2C]`, and `A [p | q] = A2 G p + (A2 G)_rot q`,
+/// `[..., V, 2C] -> [..., 2F, C]`. On the CPU one kernel reads every face row
+/// once (instead of two gathers and a concatenation); elsewhere it is the two
+/// operators below.
+struct ComplexDivergenceOp {
+    /// `A2 G` (its adjoint is [`MeshTensors::divergence`]).
+    weighted: Arc<FaceOperator>,
+    /// The same rows turned by a quarter turn (adjoint:
+    /// [`MeshTensors::rotated_divergence`]).
+    rotated: Arc<FaceOperator>,
+}
+
+impl LinearOperator for ComplexDivergenceOp {
+    fn name(&self) -> &str {
+        "paired_area_weighted_gradient"
+    }
+
+    fn apply(&self, x: &Tensor) -> Result<Tensor> {
+        let op = &self.weighted;
+        let (lead, nb, c2) = op.split(x, op.num_vertices, "paired input", "[..., V, 2C]")?;
+        if c2 % 2 != 0 {
+            return Err(shape_error(
+                self.name(),
+                "[..., V, 2C] (an even channel count)",
+                x,
+            ));
+        }
+        let c = c2 / 2;
+        if !op.use_kernels(x) {
+            let p = x.narrow(-1, 0, c);
+            let q = x.narrow(-1, c, c);
+            return Ok(op.apply(&p)? + self.rotated.apply(&q)?);
+        }
+        let mut shape = lead;
+        shape.extend([2 * op.num_faces() as i64, c]);
+        op.run_kernel(x, shape, nb, c, GatherMode::PairedForward)
+    }
+
+    fn apply_adjoint(&self, y: &Tensor) -> Result<Tensor> {
+        let op = &self.weighted;
+        let n = 2 * op.num_faces();
+        let (lead, nb, c) = op.split(y, n, "paired adjoint input", "[..., 2F, C]")?;
+        if !op.use_kernels(y) {
+            return Ok(Tensor::cat(
+                &[op.apply_adjoint(y)?, self.rotated.apply_adjoint(y)?],
+                -1,
+            ));
+        }
+        let mut shape = lead;
+        shape.extend([op.num_vertices as i64, 2 * c]);
+        op.run_kernel(y, shape, nb, c, GatherMode::PairedAdjoint)
     }
 }
 
@@ -684,9 +844,11 @@ pub struct MeshTensors {
     num_faces: usize,
     gradient: Arc<dyn LinearOperator>,
     weighted_gradient: Arc<dyn LinearOperator>,
+    rotated_weighted_gradient: Arc<dyn LinearOperator>,
+    paired_weighted_gradient: Arc<dyn LinearOperator>,
     face_mean: Arc<dyn LinearOperator>,
     solve: Arc<dyn LinearOperator>,
-    face_ops: [Arc<FaceOperator>; 3],
+    face_ops: [Arc<FaceOperator>; 4],
     solver: Arc<LaplacianSolver>,
     mass: Arc<Vec<f64>>,
     face_areas_interleaved: Arc<Vec<f64>>,
@@ -700,6 +862,8 @@ impl Clone for MeshTensors {
         Self {
             gradient: Arc::clone(&self.gradient),
             weighted_gradient: Arc::clone(&self.weighted_gradient),
+            rotated_weighted_gradient: Arc::clone(&self.rotated_weighted_gradient),
+            paired_weighted_gradient: Arc::clone(&self.paired_weighted_gradient),
             face_mean: Arc::clone(&self.face_mean),
             face_ops: self.face_ops.clone(),
             mass: Arc::clone(&self.mass),
@@ -818,6 +982,16 @@ impl MeshTensors {
         }
         let a2 = &ops.face_areas_interleaved;
         let gw: Vec<f64> = g.iter().enumerate().map(|(i, &c)| c * a2[i / 3]).collect();
+        // the same rows turned by a quarter turn in each face's frame:
+        // (x, y) coefficient rows -> (y, -x), so that its adjoint applied to
+        // (re, im) rows gives the divergence of i y
+        let mut gw_rot = vec![0.0f64; nf * 2 * 3];
+        for f in 0..nf {
+            for j in 0..3 {
+                gw_rot[(2 * f) * 3 + j] = gw[(2 * f + 1) * 3 + j];
+                gw_rot[(2 * f + 1) * 3 + j] = -gw[(2 * f) * 3 + j];
+            }
+        }
         let mean: Vec<f64> = vec![1.0 / 3.0; nf * 3];
         let faces_arc = Arc::new(faces.to_vec());
         let inc = Arc::new(Incidence::new(nv, faces));
@@ -837,6 +1011,7 @@ impl MeshTensors {
             mk("gradient", 2, g),
             mk("area_weighted_gradient", 2, gw),
             mk("face_mean", 1, mean),
+            mk("rotated_area_weighted_gradient", 2, gw_rot),
         ];
         let mean = Arc::new(Self::mean_removal(nv, faces, &ops.mass));
         let solve: Arc<dyn LinearOperator> = Arc::new(PoissonSolveOp {
@@ -848,6 +1023,11 @@ impl MeshTensors {
             gradient: face_ops[0].clone(),
             weighted_gradient: face_ops[1].clone(),
             face_mean: face_ops[2].clone(),
+            rotated_weighted_gradient: face_ops[3].clone(),
+            paired_weighted_gradient: Arc::new(ComplexDivergenceOp {
+                weighted: face_ops[1].clone(),
+                rotated: face_ops[3].clone(),
+            }),
             solve,
             face_ops,
             solver,
@@ -895,6 +1075,11 @@ impl MeshTensors {
             gradient: ops[0].clone(),
             weighted_gradient: ops[1].clone(),
             face_mean: ops[2].clone(),
+            rotated_weighted_gradient: ops[3].clone(),
+            paired_weighted_gradient: Arc::new(ComplexDivergenceOp {
+                weighted: ops[1].clone(),
+                rotated: ops[3].clone(),
+            }),
             face_ops: ops,
             backend,
             mass: Arc::clone(&self.mass),
@@ -967,6 +1152,25 @@ impl MeshTensors {
     /// `[..., 2F, C] -> [..., V, C]`.
     pub fn divergence(&self, y: &Tensor) -> Result<Tensor> {
         apply_linear(&self.weighted_gradient, y, true)
+    }
+
+    /// The weak divergence of the field turned by a quarter turn in every
+    /// face, `G^T (A2 * (i y))` with `i y = (-y_im, y_re)` per face and
+    /// channel: `[..., 2F, C] -> [..., V, C]`. Up to sign, the weak curl of `y`.
+    ///
+    /// With [`MeshTensors::divergence`] it lets a complex linear map `W`
+    /// followed by the divergence act on vertices instead of faces:
+    /// `divergence(W y) = divergence(y) Wr^T + rotated_divergence(y) Wi^T`
+    /// (`W = Wr + i Wi` acting on channels), since `W` mixes channels and
+    /// the divergence mixes faces.
+    pub fn rotated_divergence(&self, y: &Tensor) -> Result<Tensor> {
+        apply_linear(&self.rotated_weighted_gradient, y, true)
+    }
+
+    /// `[divergence(y) | rotated_divergence(y)]`, `[..., 2F, C] -> [..., V,
+    /// 2C]`, in one pass over `y` on the CPU (and one pass in its backward).
+    pub fn paired_divergence(&self, y: &Tensor) -> Result<Tensor> {
+        apply_linear(&self.paired_weighted_gradient, y, true)
     }
 
     /// Mean of `x` over each face's three vertices: `[..., V, C] -> [..., F, C]`.

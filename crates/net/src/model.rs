@@ -92,6 +92,17 @@ impl ComplexLinear {
     pub fn forward(&self, g: &Tensor) -> Result<Tensor> {
         crate::dense::complex_linear(g, &self.weight)
     }
+
+    /// `divergence(forward(g))` computed on vertices:
+    /// `divergence(g) Wr^T + rotated_divergence(g) Wi^T`, one real product
+    /// `[B, V, 2 C_in] x [2 C_in, C_out]` instead of three `[B, F, C_in] x
+    /// [C_in, C_out]` ones on faces (see [`MeshTensors::rotated_divergence`]).
+    /// Returns `[B, V, C_out]`; equal to the face form up to round-off.
+    pub fn forward_divergence(&self, g: &Tensor, mesh: &MeshTensors) -> Result<Tensor> {
+        let pq = mesh.paired_divergence(g)?;
+        let w = Tensor::cat(&[self.weight.get(0), self.weight.get(1)], 1);
+        crate::dense::linear(&pq, &w, None)
+    }
 }
 
 /// Modulated complex MLP on face features (DESIGN.md section 5, step 3).
@@ -138,6 +149,34 @@ impl VectorMlp {
     /// `g: [B, 2F, W]`, `x: [B, V, W]` the vertex features whose face means
     /// drive the modulation. Returns `[B, 2F, C_out]`.
     pub fn forward(&self, g: &Tensor, x: &Tensor, mesh: &MeshTensors) -> Result<Tensor> {
+        let (hidden, last) = self.hidden(g, x, mesh)?;
+        let _s = section("vector.layers");
+        last.forward(&hidden)
+    }
+
+    /// `mesh.divergence(self.forward(g, x, mesh))`, `[B, V, C_out]`, with the
+    /// last complex layer applied after the divergence, on vertices
+    /// ([`ComplexLinear::forward_divergence`]): what a block needs, at about
+    /// a third of that layer's cost.
+    pub fn forward_divergence(&self, g: &Tensor, x: &Tensor, mesh: &MeshTensors) -> Result<Tensor> {
+        let (hidden, last) = self.hidden(g, x, mesh)?;
+        let _s = section("vector.divergence");
+        last.forward_divergence(&hidden, mesh)
+    }
+
+    /// The modulation and every layer but the last (with their
+    /// nonlinearities), and the last layer.
+    fn hidden(
+        &self,
+        g: &Tensor,
+        x: &Tensor,
+        mesh: &MeshTensors,
+    ) -> Result<(Tensor, &ComplexLinear)> {
+        let Some((last, rest)) = self.layers.split_last() else {
+            return Err(NetError::Config(
+                "a vector MLP needs at least one layer".into(),
+            ));
+        };
         let mut g = match &self.modulation {
             Some((l1, l2)) => {
                 let _s = section("vector.modulation");
@@ -151,13 +190,10 @@ impl VectorMlp {
             None => g.shallow_clone(),
         };
         let _s = section("vector.layers");
-        for (i, layer) in self.layers.iter().enumerate() {
-            g = layer.forward(&g)?;
-            if let Some(b) = self.biases.get(i) {
-                g = crate::fused::magnitude_gelu(&g, b)?;
-            }
+        for (layer, b) in rest.iter().zip(&self.biases) {
+            g = crate::fused::magnitude_gelu(&layer.forward(&g)?, b)?;
         }
-        Ok(g)
+        Ok((g, last))
     }
 }
 
@@ -220,10 +256,10 @@ impl PoissonBlock {
             let _s = section("block.gradient");
             mesh.gradient(x)?
         };
-        let g = self.vector.forward(&g, x, mesh)?;
+        let div = self.vector.forward_divergence(&g, x, mesh)?;
         let u = {
             let _s = section("block.poisson");
-            mesh.remove_mass_mean(&mesh.solve(&mesh.divergence(&g)?)?)?
+            mesh.remove_mass_mean(&mesh.solve(&div)?)?
         };
         let _s = section("block.vertex_mlps");
         let h = match cond {

@@ -6,7 +6,7 @@ mod common;
 
 use common::{check_directional, check_parameters, randn, rel_max_diff};
 use mfm_geometry::procedural;
-use mfm_net::model::PoissonBlock;
+use mfm_net::model::{PoissonBlock, VectorMlp};
 use mfm_net::{HeadKind, MeshTensors, NetError, PoissonNet, PoissonNetConfig};
 use tch::{Device, Kind, Tensor, nn};
 
@@ -80,6 +80,59 @@ fn tiny(width: usize, blocks: usize, head: HeadKind) -> PoissonNetConfig {
         cond_channels: 2,
         modulation: true,
         head,
+    }
+}
+
+#[test]
+fn last_complex_layer_after_the_divergence_equals_the_face_form() {
+    // a block only needs the divergence of its vector MLP's output, and
+    // computes the last complex layer after it, on vertices; the value and
+    // every gradient must be those of the face form
+    tch::manual_seed(4);
+    let mesh = procedural::icosphere(2);
+    let mt = MeshTensors::new(&mesh).unwrap();
+    let (v, f2) = (mt.num_vertices() as i64, 2 * mt.num_faces() as i64);
+    for (width, out, layers) in [(6, 6, 3), (5, 3, 1), (64, 64, 2)] {
+        let mut vs = nn::VarStore::new(Device::Cpu);
+        let mlp = VectorMlp::new(vs.root(), width, layers, out, true);
+        vs.double();
+        let g = randn(&[2, f2, width as i64]).set_requires_grad(true);
+        let x = randn(&[2, v, width as i64]).set_requires_grad(true);
+        let r = randn(&[2, v, out as i64]);
+        let run = |vertex_form: bool| {
+            for mut t in vs
+                .trainable_variables()
+                .into_iter()
+                .chain([g.shallow_clone(), x.shallow_clone()])
+            {
+                t.zero_grad();
+            }
+            let y = if vertex_form {
+                mlp.forward_divergence(&g, &x, &mt).unwrap()
+            } else {
+                mt.divergence(&mlp.forward(&g, &x, &mt).unwrap()).unwrap()
+            };
+            (&y * &r).sum(Kind::Double).backward();
+            let grads: Vec<Tensor> = vs
+                .trainable_variables()
+                .iter()
+                .chain([&g, &x])
+                .map(|t| t.grad().copy())
+                .collect();
+            (y.detach(), grads)
+        };
+        let (face, face_grads) = run(false);
+        let (vertex, vertex_grads) = run(true);
+        assert_eq!(vertex.size(), vec![2, v, out as i64]);
+        let err = rel_max_diff(&vertex, &face);
+        assert!(err < 1e-12, "W{width} nl{layers}: values differ by {err}");
+        for (i, (a, b)) in vertex_grads.iter().zip(&face_grads).enumerate() {
+            let err = rel_max_diff(a, b);
+            assert!(
+                err < 1e-11,
+                "W{width} nl{layers}: gradient {i} differs by {err}"
+            );
+        }
     }
 }
 

@@ -71,6 +71,35 @@ fn gradient_and_adjoint_match_dense_operator_on_both_backends() {
             rel_max_diff(&div, &g.tr().matmul(&(&y * &a2))) < 1e-13,
             "{backend:?} G^T A2 y"
         );
+        // the divergence of i y, with i y = (-y_im, y_re) built by hand
+        let yf = y.reshape([3, f2 / 2, 2, 5]);
+        let iy = Tensor::stack(&[-yf.select(2, 1), yf.select(2, 0)], 2).reshape([3, f2, 5]);
+        let rot = m.rotated_divergence(&y).unwrap();
+        assert!(
+            rel_max_diff(&rot, &g.tr().matmul(&(&iy * &a2))) < 1e-13,
+            "{backend:?} G^T A2 (i y)"
+        );
+        // both side by side in one pass, in f64 and f32, and its adjoint:
+        // <paired(y), [p | q]> = <y, A2 G p + A2 G_rot q> (the backward)
+        let paired = m.paired_divergence(&y).unwrap();
+        assert_eq!(paired.size(), vec![3, v, 10]);
+        assert!(rel_max_diff(&paired, &Tensor::cat(&[&div, &rot], -1)) < 1e-13);
+        let p32 = m.paired_divergence(&y.to_kind(Kind::Float)).unwrap();
+        assert!(rel_max_diff(&p32.to_kind(Kind::Double), &paired) < 1e-5);
+        let pq = randn(&[3, v, 10]);
+        let yt = y.detach().set_requires_grad(true);
+        let lhs = (m.paired_divergence(&yt).unwrap() * &pq).sum(Kind::Double);
+        lhs.backward();
+        let (p, q) = (pq.narrow(-1, 0, 5), pq.narrow(-1, 5, 5));
+        let pf = (g.matmul(&p) * &a2).reshape([3, f2 / 2, 2, 5]);
+        let qf = (g.matmul(&q) * &a2).reshape([3, f2 / 2, 2, 5]);
+        // A2 G_rot q: rows (x, y) -> (y, -x) of A2 G q
+        let qrot = Tensor::stack(&[qf.select(2, 1), -qf.select(2, 0)], 2);
+        let expected = (pf + qrot).reshape([3, f2, 5]);
+        assert!(
+            rel_max_diff(&yt.grad(), &expected) < 1e-13,
+            "{backend:?} adjoint of the paired divergence"
+        );
         // f32 kernels agree with f64 to single precision
         let gx32 = m.gradient(&x.to_kind(Kind::Float)).unwrap();
         assert_eq!(gx32.kind(), Kind::Float);
@@ -210,6 +239,21 @@ fn gradient_ops_pass_finite_difference_checks() {
             "G^T A2",
             randn(&[2, f2, 3]),
             Box::new(|x: &[Tensor]| (mt.divergence(&x[0]).unwrap().tanh() * &wv).sum(Kind::Double)),
+        ),
+        (
+            "G^T A2 i",
+            randn(&[2, f2, 3]),
+            Box::new(|x: &[Tensor]| {
+                (mt.rotated_divergence(&x[0]).unwrap().tanh() * &wv).sum(Kind::Double)
+            }),
+        ),
+        (
+            "[G^T A2 | G^T A2 i]",
+            randn(&[2, f2, 3]),
+            Box::new(|x: &[Tensor]| {
+                let wp = Tensor::cat(&[&wv, &wv.flip([0])], -1);
+                (mt.paired_divergence(&x[0]).unwrap().tanh() * wp).sum(Kind::Double)
+            }),
         ),
         (
             "face mean",
