@@ -23,6 +23,8 @@
 //! | [`MeshTensors::gradient`] | `x -> G x`, `[.., V, C] -> [.., 2F, C]` | `O(F C)` per batch item |
 //! | [`MeshTensors::gradient_adjoint`] | `y -> G^T y` | `O(F C)` |
 //! | [`MeshTensors::divergence`] | `y -> G^T (A2 * y)` | `O(F C)` |
+//! | [`MeshTensors::rotated_divergence`] | `y -> G^T (A2 * (i y))` | `O(F C)` |
+//! | [`MeshTensors::paired_divergence`] | both side by side, `[.., V, 2C]`, one pass | `O(F C)` |
 //! | [`MeshTensors::face_mean`] | mean over each face's vertices, `[.., F, C]` | `O(F C)` |
 //! | [`MeshTensors::solve`] | `(L + eps I)^-1 b` | `~4 nnz(factor)` flops per column |
 //! | [`MeshTensors::mass_weighted_mean`] / [`MeshTensors::remove_mass_mean`] | per component and channel | `O(V C)` |
@@ -192,7 +194,7 @@ struct GatherKernel<'a, T> {
     rows: usize,
     num_vertices: usize,
     c: usize,
-    /// The paired modes are [`ComplexDivergenceOp`]'s (`rows == 2`): vertex
+    /// The paired modes are [`PairedDivergenceOp`]'s (`rows == 2`): vertex
     /// rows hold `2c` values, `[p | q]`.
     mode: GatherMode,
     input: &'a [T],
@@ -643,7 +645,7 @@ impl LinearOperator for FaceOperator {
 /// `[..., V, 2C] -> [..., 2F, C]`. On the CPU one kernel reads every face row
 /// once (instead of two gathers and a concatenation); elsewhere it is the two
 /// operators below.
-struct ComplexDivergenceOp {
+struct PairedDivergenceOp {
     /// `A2 G` (its adjoint is [`MeshTensors::divergence`]).
     weighted: Arc<FaceOperator>,
     /// The same rows turned by a quarter turn (adjoint:
@@ -651,7 +653,18 @@ struct ComplexDivergenceOp {
     rotated: Arc<FaceOperator>,
 }
 
-impl LinearOperator for ComplexDivergenceOp {
+impl PairedDivergenceOp {
+    /// The pair made of [`MeshTensors`]' `face_ops[1]` (`A2 G`) and
+    /// `face_ops[3]` (its rotated rows).
+    fn of(face_ops: &[Arc<FaceOperator>; 4]) -> Arc<dyn LinearOperator> {
+        Arc::new(Self {
+            weighted: Arc::clone(&face_ops[1]),
+            rotated: Arc::clone(&face_ops[3]),
+        })
+    }
+}
+
+impl LinearOperator for PairedDivergenceOp {
     fn name(&self) -> &str {
         "paired_area_weighted_gradient"
     }
@@ -1024,10 +1037,7 @@ impl MeshTensors {
             weighted_gradient: face_ops[1].clone(),
             face_mean: face_ops[2].clone(),
             rotated_weighted_gradient: face_ops[3].clone(),
-            paired_weighted_gradient: Arc::new(ComplexDivergenceOp {
-                weighted: face_ops[1].clone(),
-                rotated: face_ops[3].clone(),
-            }),
+            paired_weighted_gradient: PairedDivergenceOp::of(&face_ops),
             solve,
             face_ops,
             solver,
@@ -1076,10 +1086,7 @@ impl MeshTensors {
             weighted_gradient: ops[1].clone(),
             face_mean: ops[2].clone(),
             rotated_weighted_gradient: ops[3].clone(),
-            paired_weighted_gradient: Arc::new(ComplexDivergenceOp {
-                weighted: ops[1].clone(),
-                rotated: ops[3].clone(),
-            }),
+            paired_weighted_gradient: PairedDivergenceOp::of(&ops),
             face_ops: ops,
             backend,
             mass: Arc::clone(&self.mass),
