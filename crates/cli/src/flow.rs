@@ -6,7 +6,7 @@ use crate::output::write_json;
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use mfm_fm::checkpoint::CONFIG_FILE;
-use mfm_fm::config::{OdeMethod, RunConfig};
+use mfm_fm::config::{DeviceChoice, OdeMethod, RunConfig};
 use mfm_fm::dataset::{Dataset, Manifest};
 use mfm_fm::deformations::{self, DeformManifest, DeformMeshes};
 use mfm_fm::experiment::GmmMeshes;
@@ -148,6 +148,10 @@ pub struct TrainArgs {
     /// matern-normalized:C, white, naive, explicit:K:TAU.
     #[arg(long)]
     noise: Option<mfm_noise::NoiseKind>,
+    /// Where to train: auto (a GPU when libtorch sees one), cpu or cuda
+    /// (overrides train.device).
+    #[arg(long)]
+    pub device: Option<DeviceChoice>,
     /// Continue the run in --out from its newest valid checkpoint.
     #[arg(long)]
     resume: bool,
@@ -175,6 +179,10 @@ pub struct SampleArgs {
     /// Integrator: midpoint or euler (default: the run's).
     #[arg(long)]
     method: Option<OdeMethod>,
+    /// Where to run the network: auto (a GPU when libtorch sees one), cpu
+    /// or cuda. Samples agree across devices up to round-off.
+    #[arg(long, default_value = "auto")]
+    device: DeviceChoice,
     /// Seed of the initial noise.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -443,9 +451,14 @@ pub fn train(a: TrainArgs) -> Result<()> {
         }
     }
     let mut trainer = if a.resume {
-        if a.config.is_some() || a.preset.is_some() || a.noise.is_some() || a.seed.is_some() {
+        if a.config.is_some()
+            || a.preset.is_some()
+            || a.noise.is_some()
+            || a.seed.is_some()
+            || a.device.is_some()
+        {
             bail!(
-                "--resume continues with the run's own {CONFIG_FILE}; drop --config/--preset/--noise/--seed"
+                "--resume continues with the run's own {CONFIG_FILE}; drop --config/--preset/--noise/--seed/--device"
             );
         }
         let stored = RunConfig::from_toml_file(a.out.join(CONFIG_FILE))
@@ -481,6 +494,9 @@ pub fn train(a: TrainArgs) -> Result<()> {
         }
         if let Some(k) = a.noise {
             config.noise.kind = k;
+        }
+        if let Some(d) = a.device {
+            config.train.device = d;
         }
         let dir = dataset_dir(None, &config)?;
         let data = Dataset::open(&dir)?;
@@ -543,7 +559,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         bail!("--n must be at least 1");
     }
     let mesh = load_mesh(&a.mesh)?;
-    let sampler = Sampler::load(&a.run, None)?;
+    let sampler = Sampler::load(&a.run, Some(a.device.resolve()?))?;
     let run_config = RunConfig::from_toml_file(a.run.join(CONFIG_FILE)).ok();
     let mut opts = run_config
         .as_ref()

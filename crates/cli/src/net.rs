@@ -4,8 +4,8 @@
 use crate::mesh_arg::load_mesh;
 use anyhow::{Context, Result, bail};
 use clap::Subcommand;
+use mfm_fm::config::DeviceChoice;
 use mfm_net::bench::{BenchOptions, bench_training_step};
-use mfm_net::runtime::TorchRuntime;
 use mfm_net::{PoissonNet, PoissonNetConfig};
 
 /// `mfm net ...`.
@@ -48,6 +48,9 @@ pub enum NetCommand {
         /// Also print the time per network section.
         #[arg(long)]
         profile: bool,
+        /// Where to run: auto (a GPU when libtorch sees one), cpu or cuda.
+        #[arg(long, default_value = "auto")]
+        device: DeviceChoice,
     },
 }
 
@@ -64,6 +67,7 @@ pub fn run(cmd: NetCommand) -> Result<()> {
             inference,
             threads,
             profile,
+            device,
         } => {
             if batch == 0 || steps == 0 {
                 bail!("--batch and --steps must be at least 1");
@@ -73,14 +77,13 @@ pub fn run(cmd: NetCommand) -> Result<()> {
             }
             let config = preset_config(&preset)?;
             let mesh = load_mesh(&mesh)?;
-            let runtime = TorchRuntime::query();
             let opts = BenchOptions {
                 batch,
                 steps,
                 warmup,
                 inference_runs: inference,
                 threads,
-                device: runtime.preferred_device(),
+                device: device.resolve()?,
                 profile,
                 ..BenchOptions::default()
             };

@@ -543,6 +543,48 @@ fn gmm_dataset_train_sample_eval_end_to_end() {
     assert!(dir.path().join("samples/sample_001.ply").is_file());
     assert!(!dir.path().join("samples/sample_002.ply").exists());
     assert!(dir.path().join("samples/samples.png").is_file());
+    // --device: cpu gives the same samples here; a bad name and a missing
+    // GPU are clear errors
+    let sample_on = |device: &str, out: &str| {
+        mfm(&[
+            "sample",
+            "--run",
+            &p("run"),
+            "--mesh",
+            &test_mesh,
+            "--n",
+            "5",
+            "--out",
+            &p(out),
+            "--device",
+            device,
+        ])
+    };
+    let o = sample_on("cpu", "samples_cpu");
+    assert!(o.status.success(), "{}", stderr(&o));
+    // (equal here; with a GPU the first run used it: equal up to round-off)
+    let on_cpu = read_npy_f32(&dir.path().join("samples_cpu/samples.npy")).1;
+    let diff = on_cpu
+        .iter()
+        .zip(&samples)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(on_cpu.len() == samples.len() && diff < 1e-4, "{diff}");
+    let o = sample_on("tpu", "samples_tpu");
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("expected auto, cpu or cuda"),
+        "{}",
+        stderr(&o)
+    );
+    let o = sample_on("cuda", "samples_cuda");
+    if !o.status.success() {
+        assert!(stderr(&o).contains("no CUDA device"), "{}", stderr(&o));
+    }
+    // a resumed run keeps its own device
+    let o = mfm(&["train", "--out", &p("run"), "--resume", "--device", "cpu"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--device"), "{}", stderr(&o));
 
     let o = mfm(&[
         "eval",

@@ -490,8 +490,24 @@ impl DeviceChoice {
             Self::Auto | Self::Cpu => Ok(tch::Device::Cpu),
             Self::Cuda if cuda => Ok(tch::Device::Cuda(0)),
             Self::Cuda => Err(FmError::Config(
-                "train.device = \"cuda\" but libtorch sees no CUDA device".into(),
+                "device \"cuda\" asked for, but libtorch sees no CUDA device".into(),
             )),
+        }
+    }
+}
+
+impl std::str::FromStr for DeviceChoice {
+    type Err = FmError;
+
+    /// `auto`, `cpu` or `cuda` (as in `train.device`).
+    fn from_str(s: &str) -> Result<Self> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "auto" => Ok(Self::Auto),
+            "cpu" => Ok(Self::Cpu),
+            "cuda" => Ok(Self::Cuda),
+            other => Err(FmError::Config(format!(
+                "unknown device {other:?}; expected auto, cpu or cuda"
+            ))),
         }
     }
 }
@@ -865,6 +881,31 @@ mod tests {
         assert_eq!(d.lr(1.0, 40), 0.2);
         assert!((d.lr(1.0, 200) - 0.04).abs() < 1e-15);
         assert_eq!(LrSchedule::constant().lr(3.0, 1_000_000), 3.0);
+    }
+
+    #[test]
+    fn device_choices_parse_like_the_config_field() {
+        for (text, choice) in [
+            ("auto", DeviceChoice::Auto),
+            (" CPU", DeviceChoice::Cpu),
+            ("cuda", DeviceChoice::Cuda),
+        ] {
+            assert_eq!(text.parse::<DeviceChoice>().unwrap(), choice);
+            // the same spelling as `train.device` in a config file
+            let toml = format!("[train]\ndevice = {:?}\n", text.trim().to_lowercase());
+            let c = RunConfig::from_toml_str(&toml, "x").unwrap();
+            assert_eq!(c.train.device, choice);
+        }
+        let e = "gpu".parse::<DeviceChoice>().unwrap_err().to_string();
+        assert!(
+            e.contains("\"gpu\"") && e.contains("auto, cpu or cuda"),
+            "{e}"
+        );
+        assert_eq!(DeviceChoice::Cpu.resolve().unwrap(), tch::Device::Cpu);
+        match DeviceChoice::Cuda.resolve() {
+            Ok(d) => assert_eq!(d, tch::Device::Cuda(0)),
+            Err(e) => assert!(e.to_string().contains("no CUDA device"), "{e}"),
+        }
     }
 
     #[test]
