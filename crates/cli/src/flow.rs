@@ -149,7 +149,7 @@ pub struct TrainArgs {
     #[arg(long)]
     noise: Option<mfm_noise::NoiseKind>,
     /// Where to train: auto (a GPU when libtorch sees one), cpu or cuda
-    /// (overrides train.device).
+    /// (overrides train.device; with --resume, continues the run there).
     #[arg(long)]
     pub device: Option<DeviceChoice>,
     /// Continue the run in --out from its newest valid checkpoint.
@@ -451,14 +451,9 @@ pub fn train(a: TrainArgs) -> Result<()> {
         }
     }
     let mut trainer = if a.resume {
-        if a.config.is_some()
-            || a.preset.is_some()
-            || a.noise.is_some()
-            || a.seed.is_some()
-            || a.device.is_some()
-        {
+        if a.config.is_some() || a.preset.is_some() || a.noise.is_some() || a.seed.is_some() {
             bail!(
-                "--resume continues with the run's own {CONFIG_FILE}; drop --config/--preset/--noise/--seed/--device"
+                "--resume continues with the run's own {CONFIG_FILE}; drop --config/--preset/--noise/--seed"
             );
         }
         let stored = RunConfig::from_toml_file(a.out.join(CONFIG_FILE))
@@ -466,7 +461,10 @@ pub fn train(a: TrainArgs) -> Result<()> {
         let dir = dataset_dir(a.dataset.as_deref(), &stored)?;
         let data = Dataset::open(&dir)?;
         let mesh = data.mesh().clone();
-        let mut t = Trainer::resume(&a.out, &mesh, Arc::new(data))?;
+        let mut t = match a.device {
+            Some(d) => Trainer::resume_on(&a.out, &mesh, Arc::new(data), d)?,
+            None => Trainer::resume(&a.out, &mesh, Arc::new(data))?,
+        };
         if let Some(r) = t.resumed() {
             match &r.checkpoint {
                 Some(c) => println!("resuming from {} (step {})", c.display(), r.step),

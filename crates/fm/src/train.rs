@@ -72,7 +72,7 @@ use crate::checkpoint::{
     self, CONFIG_FILE, CheckpointState, FLOW_FILE, FlowSpec, LOG_FILE, LogAccumulator,
     OPTIMIZER_FILE, WEIGHTS_FILE,
 };
-use crate::config::{NoiseScale, RunConfig};
+use crate::config::{DeviceChoice, NoiseScale, RunConfig};
 use crate::error::{FmError, Result};
 use crate::sample::{conditioning, offset_tensor, positions_tensor};
 use crate::signals::SignalSource;
@@ -626,6 +626,39 @@ impl Trainer {
         mesh: &TriMesh,
         signals: Arc<dyn SignalSource>,
     ) -> Result<Self> {
+        Self::resume_with_device(run_dir, mesh, signals, None)
+    }
+
+    /// [`Trainer::resume`] on another device than the stored configuration's
+    /// `train.device` (checkpoints hold CPU tensors, so a run started on a
+    /// GPU can go on on the CPU and back). The steps after the checkpoint
+    /// differ from an uninterrupted run only by the devices' round-off; the
+    /// next checkpoints store the new choice.
+    ///
+    /// # Errors
+    /// As [`Trainer::resume`]; [`FmError::Config`] for
+    /// [`DeviceChoice::Cuda`] without a GPU.
+    pub fn resume_on(
+        run_dir: impl AsRef<Path>,
+        mesh: &TriMesh,
+        signals: Arc<dyn SignalSource>,
+        device: DeviceChoice,
+    ) -> Result<Self> {
+        Self::resume_with_device(run_dir, mesh, signals, Some(device))
+    }
+
+    fn resume_with_device(
+        run_dir: impl AsRef<Path>,
+        mesh: &TriMesh,
+        signals: Arc<dyn SignalSource>,
+        device: Option<DeviceChoice>,
+    ) -> Result<Self> {
+        let with_device = |mut config: RunConfig| {
+            if let Some(d) = device {
+                config.train.device = d;
+            }
+            config
+        };
         let run_dir = run_dir.as_ref().to_path_buf();
         checkpoint::remove_stale_temporaries(&run_dir)?;
         let (best, skipped) = checkpoint::newest_valid_checkpoint(&run_dir)?;
@@ -639,7 +672,7 @@ impl Trainer {
             if let Some((_, err)) = skipped.into_iter().next() {
                 return Err(err);
             }
-            let config = RunConfig::from_toml_file(run_dir.join(CONFIG_FILE))?;
+            let config = with_device(RunConfig::from_toml_file(run_dir.join(CONFIG_FILE))?);
             let mut t = Self::new_in_existing(run_dir, config, mesh, signals)?;
             t.resumed = Some(ResumeInfo {
                 checkpoint: None,
@@ -648,7 +681,7 @@ impl Trainer {
             });
             return Ok(t);
         };
-        let config = RunConfig::from_toml_file(info.dir.join(CONFIG_FILE))?;
+        let config = with_device(RunConfig::from_toml_file(info.dir.join(CONFIG_FILE))?);
         let flow = FlowSpec::read(info.dir.join(FLOW_FILE))?;
         check_signals(mesh, signals.as_ref())?;
         if flow.channels != signals.channels() {

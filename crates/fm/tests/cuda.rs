@@ -167,6 +167,26 @@ fn training_and_sampling_on_cuda_match_the_cpu() {
     for (g, r) in lg.iter().zip(&lr) {
         assert!((g - r).abs() / g.abs() < 1e-4, "resumed loss {r} vs {g}");
     }
+    // ... and, moved to the CPU at step 3, also ends there
+    let moved = tempfile::tempdir().unwrap();
+    Trainer::new(
+        moved.path(),
+        config(DeviceChoice::Cuda),
+        &mesh,
+        data.clone(),
+    )
+    .unwrap()
+    .run_until(3, &stop, false)
+    .unwrap();
+    let mut t = Trainer::resume_on(moved.path(), &mesh, data.clone(), DeviceChoice::Cpu).unwrap();
+    assert_eq!(t.device(), Device::Cpu);
+    t.run(&stop, false).unwrap();
+    for (g, m) in lg.iter().zip(&losses(moved.path())) {
+        assert!(
+            (g - m).abs() / g.abs() < 1e-4,
+            "loss after the move {m} vs {g}"
+        );
+    }
 
     // sampling the CPU-trained model on the GPU and on the CPU, on a
     // refinement of the training mesh

@@ -220,6 +220,44 @@ fn interrupted_and_resumed_runs_equal_the_uninterrupted_run() {
 }
 
 #[test]
+fn a_run_resumed_on_another_device_choice_goes_on_there() {
+    let mesh = procedural::icosphere(1);
+    let signals = smooth_signals(&mesh, 4, 2);
+    let cfg = tiny_config(10);
+    let full = trained_run(cfg.clone(), &mesh, signals.clone());
+    let moved = tempfile::tempdir().unwrap();
+    Trainer::new(moved.path(), cfg, &mesh, signals.clone())
+        .unwrap()
+        .run_until(5, &no_stop(), false)
+        .unwrap();
+    // `auto`: the CPU here (bit for bit the same run), a GPU where there is one
+    let mut t =
+        Trainer::resume_on(moved.path(), &mesh, signals.clone(), DeviceChoice::Auto).unwrap();
+    assert_eq!(t.resumed().unwrap().step, 5);
+    assert_eq!(t.device(), DeviceChoice::Auto.resolve().unwrap());
+    t.run(&no_stop(), false).unwrap();
+    let last = checkpoint::checkpoint_dir(moved.path(), 10);
+    let stored = RunConfig::from_toml_file(last.join(checkpoint::CONFIG_FILE)).unwrap();
+    assert_eq!(
+        stored.train.device,
+        DeviceChoice::Auto,
+        "the new choice is kept"
+    );
+    if t.device() == tch::Device::Cpu {
+        assert_bit_identical(
+            &full.path().join(WEIGHTS_FILE),
+            &moved.path().join(WEIGHTS_FILE),
+        );
+        assert_eq!(log_rows(moved.path()), log_rows(full.path()));
+    }
+    // a GPU that libtorch does not see is a clear error
+    if !tch::Cuda::is_available() {
+        let e = Trainer::resume_on(moved.path(), &mesh, signals, DeviceChoice::Cuda).unwrap_err();
+        assert!(e.to_string().contains("no CUDA device"), "{e}");
+    }
+}
+
+#[test]
 fn augmented_position_runs_resume_bit_for_bit_and_differ_from_plain_ones() {
     let mesh = procedural::icosphere(1);
     let signals = smooth_signals(&mesh, 4, 3);
