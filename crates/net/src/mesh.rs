@@ -268,6 +268,20 @@ impl<T: Scalar> GatherKernel<'_, T> {
         }
     }
 
+    /// In the adjoint kernels, before vertex `vi`'s sum: the faces of the
+    /// next vertex are scattered over the input `yb` (one batch item, `block`
+    /// values per face), so ask for their first cache lines now (the rest of
+    /// each face's rows follow sequentially).
+    #[inline(always)]
+    fn prefetch_next_vertex(&self, yb: &[T], vi: usize, block: usize) {
+        let inc = self.incidence;
+        if vi + 1 < self.num_vertices {
+            for k in inc.ptr[vi + 1]..inc.ptr[vi + 2] {
+                prefetch(&yb[inc.face[k] as usize * block..], block);
+            }
+        }
+    }
+
     /// Paired adjoint: face rows `(y0, y1)` to vertex rows `[p | q]` with
     /// `p = A^T y` and `q = A_rot^T y` (per incidence with coefficients
     /// `(w0, w1)`: `p += w0 y0 + w1 y1`, `q += w1 y0 - w0 y1`), reading each
@@ -281,11 +295,7 @@ impl<T: Scalar> GatherKernel<'_, T> {
         for idx in begin..end {
             let (b, vi) = (idx / v, idx % v);
             let yb = &y[b * f * block..(b + 1) * f * block];
-            if vi + 1 < v {
-                for k in inc.ptr[vi + 1]..inc.ptr[vi + 2] {
-                    prefetch(&yb[inc.face[k] as usize * block..], block);
-                }
-            }
+            self.prefetch_next_vertex(yb, vi, block);
             // SAFETY: row idx (2c values) belongs to this range only.
             let (op, oq) = unsafe {
                 std::slice::from_raw_parts_mut(out.get().add(idx * 2 * c), 2 * c).split_at_mut(c)
@@ -341,14 +351,7 @@ impl<T: Scalar> GatherKernel<'_, T> {
         for idx in begin..end {
             let (b, vi) = (idx / v, idx % v);
             let yb = &y[b * f * block..(b + 1) * f * block];
-            // the faces of the next vertex are scattered over the input:
-            // ask for their first cache lines now (the rest of each face's
-            // rows follow sequentially)
-            if vi + 1 < v {
-                for k in inc.ptr[vi + 1]..inc.ptr[vi + 2] {
-                    prefetch(&yb[inc.face[k] as usize * block..], block);
-                }
-            }
+            self.prefetch_next_vertex(yb, vi, block);
             // SAFETY: row idx belongs to this range only.
             let o = unsafe { std::slice::from_raw_parts_mut(out.get().add(idx * c), c) };
             o.fill(T::default());
