@@ -150,16 +150,15 @@ fn training_and_sampling_on_cuda_match_the_cpu() {
 
     // a run interrupted on the GPU resumes there and ends where the
     // uninterrupted one did (up to CUDA's non-deterministic reductions)
-    let resumed = tempfile::tempdir().unwrap();
-    Trainer::new(
-        resumed.path(),
-        config(DeviceChoice::Cuda),
-        &mesh,
-        data.clone(),
-    )
-    .unwrap()
-    .run_until(3, &stop, false)
-    .unwrap();
+    let stopped_on_gpu_at_3 = || {
+        let dir = tempfile::tempdir().unwrap();
+        Trainer::new(dir.path(), config(DeviceChoice::Cuda), &mesh, data.clone())
+            .unwrap()
+            .run_until(3, &stop, false)
+            .unwrap();
+        dir
+    };
+    let resumed = stopped_on_gpu_at_3();
     let mut t = Trainer::resume(resumed.path(), &mesh, data.clone()).unwrap();
     assert_eq!((t.resumed().unwrap().step, t.device()), (3, gpu));
     t.run(&stop, false).unwrap();
@@ -168,16 +167,7 @@ fn training_and_sampling_on_cuda_match_the_cpu() {
         assert!((g - r).abs() / g.abs() < 1e-4, "resumed loss {r} vs {g}");
     }
     // ... and, moved to the CPU at step 3, also ends there
-    let moved = tempfile::tempdir().unwrap();
-    Trainer::new(
-        moved.path(),
-        config(DeviceChoice::Cuda),
-        &mesh,
-        data.clone(),
-    )
-    .unwrap()
-    .run_until(3, &stop, false)
-    .unwrap();
+    let moved = stopped_on_gpu_at_3();
     let mut t = Trainer::resume_on(moved.path(), &mesh, data.clone(), DeviceChoice::Cpu).unwrap();
     assert_eq!(t.device(), Device::Cpu);
     t.run(&stop, false).unwrap();
