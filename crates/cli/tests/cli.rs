@@ -520,19 +520,15 @@ fn gmm_dataset_train_sample_eval_end_to_end() {
 
     // Sample on the reference's (non-uniform, finer) mesh.
     let test_mesh = p("data/reference/mesh.ply");
-    let o = mfm(&[
-        "sample",
-        "--run",
-        &p("run"),
-        "--mesh",
-        &test_mesh,
-        "--n",
-        "5",
-        "--out",
-        &p("samples"),
-        "--ply",
-        "2",
-    ]);
+    // five samples of the run on the test mesh into `out`, with `extra` flags
+    let sample_into = |out: &str, extra: &[&str]| {
+        let (run, out) = (p("run"), p(out));
+        let mut args = vec!["sample", "--run", &run, "--mesh", &test_mesh];
+        args.extend(["--n", "5", "--out", &out]);
+        args.extend(extra);
+        mfm(&args)
+    };
+    let o = sample_into("samples", &["--ply", "2"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let (shape, samples) = read_npy_f32(&dir.path().join("samples/samples.npy"));
     let test_v = mfm_geometry::io::read_mesh(&test_mesh)
@@ -545,21 +541,7 @@ fn gmm_dataset_train_sample_eval_end_to_end() {
     assert!(dir.path().join("samples/samples.png").is_file());
     // --device: cpu gives the same samples here; a bad name and a missing
     // GPU are clear errors
-    let sample_on = |device: &str, out: &str| {
-        mfm(&[
-            "sample",
-            "--run",
-            &p("run"),
-            "--mesh",
-            &test_mesh,
-            "--n",
-            "5",
-            "--out",
-            &p(out),
-            "--device",
-            device,
-        ])
-    };
+    let sample_on = |device: &str, out: &str| sample_into(out, &["--device", device]);
     let o = sample_on("cpu", "samples_cpu");
     assert!(o.status.success(), "{}", stderr(&o));
     // (equal here; with a GPU the first run used it: equal up to round-off)
