@@ -164,6 +164,8 @@ unsafe extern "C" fn forward_trampoline<F: CustomFunction>(
         let f = unsafe { &mut *state.cast::<F>() };
         // SAFETY: the shim passes `num_inputs` valid tensors.
         let ins = unsafe { borrow_tensors(inputs, num_inputs) };
+        let _s =
+            crate::profile::enabled().then(|| crate::profile::section(format!("fn:{}", f.name())));
         let outs = f.forward(&ins)?;
         if outs.is_empty() || outs.len() > max_outputs as usize {
             return Err(NetError::CustomOp {
@@ -216,6 +218,8 @@ unsafe extern "C" fn backward_trampoline<F: CustomFunction>(
         let f = unsafe { &mut *state.cast::<F>() };
         // SAFETY: the shim passes `num_grad_outputs` valid tensors.
         let grads = unsafe { borrow_tensors(grad_outputs, num_grad_outputs) };
+        let _s = crate::profile::enabled()
+            .then(|| crate::profile::section(format!("fn:{}^T", f.name())));
         let gi = f.backward(&grads)?;
         if gi.len() != num_inputs as usize {
             return Err(NetError::CustomOp {

@@ -86,6 +86,10 @@ pub struct BenchReport {
     pub num_faces: usize,
     /// Trainable parameters of the network.
     pub num_parameters: usize,
+    /// Dense-product work of one forward pass of one batch item
+    /// ([`crate::PoissonNetConfig::forward_product_flops`]); a training step
+    /// does `3 * batch` times this.
+    pub forward_product_flops: u64,
     /// Batch size of the training steps.
     pub batch: usize,
     /// libtorch intra-op threads during the run.
@@ -138,6 +142,33 @@ impl BenchReport {
     pub fn median_inference(&self) -> f64 {
         median(&self.inference_seconds)
     }
+
+    /// With [`BenchOptions::profile`]: wall seconds per step spent inside the
+    /// dense layers' autograd nodes, forward and backward ([`crate::dense`]'s
+    /// `linear` and `complex_linear` sections: the products and the bias
+    /// and sum passes around them); `None` without a profile or when no
+    /// dense layer ran on the CPU.
+    pub fn profiled_product_seconds(&self) -> Option<f64> {
+        const DENSE: [&str; 4] = [
+            "fn:linear",
+            "fn:linear^T",
+            "fn:complex_linear",
+            "fn:complex_linear^T",
+        ];
+        let total: f64 = self
+            .sections
+            .iter()
+            .filter(|r| DENSE.contains(&r.name.as_str()))
+            .map(|r| r.wall)
+            .sum();
+        (total > 0.0).then_some(total)
+    }
+
+    /// Dense-product work of one training step: `3 * batch *
+    /// forward_product_flops` (forward, then input and weight gradients).
+    pub fn step_product_flops(&self) -> u64 {
+        3 * self.batch as u64 * self.forward_product_flops
+    }
 }
 
 impl std::fmt::Display for BenchReport {
@@ -168,6 +199,35 @@ impl std::fmt::Display for BenchReport {
                 "inference, batch 1 (median of {}): {:.1} ms",
                 self.inference_seconds.len(),
                 self.median_inference() * 1e3
+            )?;
+        }
+        let step_flops = self.step_product_flops() as f64;
+        if step_flops > 0.0 && !self.step_seconds.is_empty() {
+            write!(
+                f,
+                "dense products: {:.1} GFLOP per step ({:.0} GFLOP/s over the whole step)",
+                step_flops * 1e-9,
+                step_flops * 1e-9 / self.median_step()
+            )?;
+            if !self.inference_seconds.is_empty() {
+                let inference_flops = self.forward_product_flops as f64;
+                write!(
+                    f,
+                    ", {:.1} per inference ({:.0} GFLOP/s)",
+                    inference_flops * 1e-9,
+                    inference_flops * 1e-9 / self.median_inference()
+                )?;
+            }
+            writeln!(f)?;
+        }
+        if let Some(products) = self.profiled_product_seconds() {
+            let step = self.median_step();
+            writeln!(
+                f,
+                "profiled: {:.3} s per step in the dense layers ({:.0} GFLOP/s), {:.3} s in everything else",
+                products,
+                self.step_product_flops() as f64 * 1e-9 / products,
+                (step - products).max(0.0)
             )?;
         }
         if !self.sections.is_empty() {
@@ -299,6 +359,7 @@ pub fn bench_training_step(
         num_vertices: mt.num_vertices(),
         num_faces: mt.num_faces(),
         num_parameters: net.num_parameters(),
+        forward_product_flops: config.forward_product_flops(mt.num_vertices(), mt.num_faces()),
         batch: opts.batch,
         threads: tch::get_num_threads(),
         setup_seconds,

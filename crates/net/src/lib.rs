@@ -53,8 +53,14 @@
 //!   `div(W g) = div(g) Wr^T + div(i g) Wi^T`
 //!   ([`model::ComplexLinear::forward_divergence`], with both divergences in
 //!   one pass, [`MeshTensors::paired_divergence`]): one `[V, 2W] x [2W, W]`
-//!   product instead of three `[F, W] x [W, W]` ones, ~390 GFLOP per paper
+//!   product instead of three `[F, W] x [W, W]` ones, ~392 GFLOP per paper
 //!   step;
+//! - the solve output `u` is never formed: the columns of the first vertex
+//!   MLP's weight that read it are folded into that last complex layer
+//!   before the solve (exact, see [`model`]), ~379 GFLOP per paper step
+//!   ([`PoissonNetConfig::forward_product_flops`] is the cost model; a test
+//!   checks it against the products the layers run,
+//!   [`dense::counted_product_flops`]);
 //! - dense layers use faer's GEMM ([`dense`]), ~15-25% faster per core than
 //!   the MKL inside the torch wheel on the AMD benchmark machine;
 //! - the modulation and the magnitude nonlinearity are single-pass fused

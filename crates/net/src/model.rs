@@ -12,6 +12,18 @@
 //! `Linear1(face_mean(x)) = face_mean(Linear1(x))`; it runs on the `V`
 //! vertices instead of the `F ~ 2V` faces.
 //!
+//! Two more rewrites move products from faces to vertices or drop them:
+//! a block needs only the divergence of its vector MLP's output, so the last
+//! complex layer runs after the divergence, on vertices
+//! ([`VectorMlp::forward_divergence`]); and the block's solve output `u` is
+//! read only by the first vertex MLP's first layer, through the columns `B`
+//! of its weight that multiply `u`. The solve and the mass-weighted mean
+//! removal act on each channel alike (linear maps over vertices), so they
+//! commute with a channel map: `u B^T = remove_mean(solve(div B^T))`, and
+//! `B` is folded into the last complex layer's weight before the solve
+//! ([`VectorMlp::forward_divergence_mapped`]), which saves one `[V, W] x [W,
+//! W]` product per block.
+//!
 //! ## Variables (names in the safetensors file)
 //! - `proj_in.{weight,bias}`: `Linear(C_in, W)`;
 //!   `cond.{0,1}.{weight,bias}`: `Linear(C_e, W)`, `Linear(W, W)`.
@@ -99,8 +111,35 @@ impl ComplexLinear {
     /// [C_in, C_out]` ones on faces (see [`MeshTensors::rotated_divergence`]).
     /// Returns `[B, V, C_out]`; equal to the face form up to round-off.
     pub fn forward_divergence(&self, g: &Tensor, mesh: &MeshTensors) -> Result<Tensor> {
+        self.forward_divergence_mapped(g, mesh, None)
+    }
+
+    /// `forward_divergence(g, mesh) B^T` for a real channel map `B: [C,
+    /// C_out]` (`None`: the identity), with `B` multiplied into the weight
+    /// (`[C, 2 C_in]`, a product of weights) rather than applied to the
+    /// `[B, V, C_out]` result. Returns `[B, V, C]`.
+    pub fn forward_divergence_mapped(
+        &self,
+        g: &Tensor,
+        mesh: &MeshTensors,
+        map: Option<&Tensor>,
+    ) -> Result<Tensor> {
         let pq = mesh.paired_divergence(g)?;
         let w = Tensor::cat(&[self.weight.get(0), self.weight.get(1)], 1);
+        let w = match map {
+            Some(b) => {
+                let (bs, ws) = (b.size(), w.size());
+                if bs.len() != 2 || bs[1] != ws[0] {
+                    return Err(shape_error(
+                        "channel map after a complex layer",
+                        format!("[C, {}]", ws[0]),
+                        b,
+                    ));
+                }
+                b.matmul(&w)
+            }
+            None => w,
+        };
         crate::dense::linear(&pq, &w, None)
     }
 }
@@ -159,9 +198,22 @@ impl VectorMlp {
     /// ([`ComplexLinear::forward_divergence`]): what a block needs, at about
     /// a third of that layer's cost.
     pub fn forward_divergence(&self, g: &Tensor, x: &Tensor, mesh: &MeshTensors) -> Result<Tensor> {
+        self.forward_divergence_mapped(g, x, mesh, None)
+    }
+
+    /// `forward_divergence(g, x, mesh) B^T` for a real channel map `B: [C,
+    /// C_out]`, folded into the last complex layer's weight
+    /// ([`ComplexLinear::forward_divergence_mapped`]). Returns `[B, V, C]`.
+    pub fn forward_divergence_mapped(
+        &self,
+        g: &Tensor,
+        x: &Tensor,
+        mesh: &MeshTensors,
+        map: Option<&Tensor>,
+    ) -> Result<Tensor> {
         let (hidden, last) = self.hidden(g, x, mesh)?;
         let _s = section("vector.divergence");
-        last.forward_divergence(&hidden, mesh)
+        last.forward_divergence_mapped(&hidden, mesh, map)
     }
 
     /// The modulation and every layer but the last (with their
@@ -256,17 +308,37 @@ impl PoissonBlock {
             let _s = section("block.gradient");
             mesh.gradient(x)?
         };
-        let div = self.vector.forward_divergence(&g, x, mesh)?;
-        let u = {
+        // MLP1 reads h = [x, u, e]: with its first weight's columns split as
+        // [A_x | B | A_e], `h W^T = x A_x^T + u B^T + e A_e^T`, and
+        // `u B^T = remove_mean(solve(div B^T))` (module docs), so `B` folds
+        // into the last complex layer and `u` itself is never formed
+        let l1 = &self.mlp1.l1;
+        let w = x.size().last().copied().unwrap_or(0);
+        let expected = if cond.is_some() { 3 * w } else { 2 * w };
+        if l1.ws.size() != [w, expected] {
+            return Err(shape_error(
+                "block input (conditioning given to an unconditioned block, or the reverse)",
+                format!("a first vertex MLP weight [{w}, {expected}]"),
+                &l1.ws,
+            ));
+        }
+        let div =
+            self.vector
+                .forward_divergence_mapped(&g, x, mesh, Some(&l1.ws.narrow(1, w, w)))?;
+        let ub = {
             let _s = section("block.poisson");
             mesh.remove_mass_mean(&mesh.solve(&div)?)?
         };
         let _s = section("block.vertex_mlps");
-        let h = match cond {
-            Some(e) => Tensor::cat(&[x, &u, e], -1),
-            None => Tensor::cat(&[x, &u], -1),
+        let (input, a) = match cond {
+            Some(e) => (
+                Tensor::cat(&[x, e], -1),
+                Tensor::cat(&[l1.ws.narrow(1, 0, w), l1.ws.narrow(1, 2 * w, w)], 1),
+            ),
+            None => (x.shallow_clone(), l1.ws.narrow(1, 0, w)),
         };
-        let x = x + &self.gamma1 * self.mlp1.forward(&h)?;
+        let pre = crate::dense::linear(&input, &a, l1.bs.as_ref())? + ub;
+        let x = x + &self.gamma1 * dense(&self.mlp1.l2, &gelu(&pre))?;
         let x = &x + &self.gamma2 * self.mlp2.forward(&x)?;
         Ok(x)
     }
@@ -510,11 +582,13 @@ impl PoissonNet {
     /// or `[V, C_e]`, required exactly when `C_e > 0`. Outputs are batched
     /// (`[B, ...]`) even for an unbatched input.
     ///
-    /// Cost per block: about `(4 nl + 2) B F W^2 + 7 B V W^2` multiply-adds
-    /// (complex layers, modulation, vertex MLPs; with conditioning) plus one
-    /// multi-column solve of `B W` right-hand sides, and twice that work
-    /// again in the backward pass. For the paper preset at batch 8 on a
-    /// 3.5k-vertex mesh that is ~179 GFLOP forward, ~537 per training step.
+    /// Cost: the dense products of
+    /// [`PoissonNetConfig::forward_product_flops`] per batch item (about
+    /// `(3 (nl - 1) + 2) F W^2 + 8 V W^2` multiply-adds per block, with
+    /// conditioning), plus one multi-column solve of `B W` right-hand sides
+    /// per block, and twice those products again in the backward pass. For
+    /// the paper preset at batch 8 on a 3.5k-vertex mesh that is ~126 GFLOP
+    /// forward, ~379 per training step.
     ///
     /// Errors: [`NetError::Shape`] / [`NetError::Kind`] for inputs that do not
     /// fit the mesh or the configuration, solver errors from the solves.

@@ -10,9 +10,14 @@
 //! the time of its operations; on a GPU it only measures the launch unless
 //! the section synchronizes.
 //!
-//! Sections nest freely (each reports its own inclusive time). Custom
-//! operators ([`crate::autograd::apply_linear`]) report as `op:<name>`, in the
-//! forward pass and when autograd calls them in the backward pass.
+//! Sections nest freely (each reports its own inclusive time). Every custom
+//! autograd node ([`crate::autograd::apply_custom`]) reports its forward as
+//! `fn:<name>` and its backward as `fn:<name>^T`; linear operators
+//! ([`crate::autograd::apply_linear`], themselves custom nodes) also report
+//! as `op:<name>` (`op:<name>^T` for the adjoint), so an operator's time
+//! appears under both names. The dense layers add `linear.dx`,
+//! `linear.dw <o>x<k>`, `linear.bias`, `linear.db`, `complex.dz` and
+//! `complex.dw` inside their nodes.
 
 use std::collections::BTreeMap;
 use std::sync::Mutex;

@@ -137,6 +137,93 @@ fn last_complex_layer_after_the_divergence_equals_the_face_form() {
 }
 
 #[test]
+fn a_block_equals_its_specification_with_the_solve_output_formed() {
+    // the block folds the columns of MLP1's first weight that read `u` into
+    // the last complex layer before the solve (model docs); value and every
+    // gradient must equal the block as DESIGN.md writes it: u = solve(div)
+    // with the mean removed, h = [x, u, e], x + gamma1 MLP1(h), ...
+    tch::manual_seed(5);
+    let mesh = procedural::icosphere(2);
+    let mt = MeshTensors::new(&mesh).unwrap();
+    let v = mt.num_vertices() as i64;
+    for (w, conditioned) in [(6usize, true), (5, false), (64, true)] {
+        let wi = w as i64;
+        let mut vs = nn::VarStore::new(Device::Cpu);
+        let block = PoissonBlock::new(vs.root(), w, 3, true, conditioned);
+        vs.double();
+        let mut spec_vs = nn::VarStore::new(Device::Cpu);
+        let vector = VectorMlp::new(spec_vs.root() / "vector", w, 3, w, true);
+        spec_vs.double();
+        spec_vs.copy(&vs).unwrap();
+        let x = randn(&[2, v, wi]).set_requires_grad(true);
+        let e = randn(&[2, v, wi]).set_requires_grad(true);
+        let cond = conditioned.then_some(&e);
+        let r = randn(&[2, v, wi]);
+        let vars = vs.variables();
+        let lin = |t: &Tensor, name: &str| {
+            t.linear(
+                &vars[&format!("{name}.weight")],
+                Some(&vars[&format!("{name}.bias")]),
+            )
+        };
+        let spec = || {
+            let g = mt.gradient(&x).unwrap();
+            let div = vector.forward_divergence(&g, &x, &mt).unwrap();
+            let u = mt.remove_mass_mean(&mt.solve(&div).unwrap()).unwrap();
+            let h = match cond {
+                Some(e) => Tensor::cat(&[&x, &u, e], -1),
+                None => Tensor::cat(&[&x, &u], -1),
+            };
+            let x1 = &x + &vars["gamma1"] * lin(&lin(&h, "mlp1.0").gelu("none"), "mlp1.1");
+            &x1 + &vars["gamma2"] * lin(&lin(&x1, "mlp2.0").gelu("none"), "mlp2.1")
+        };
+        let all = || {
+            vs.trainable_variables()
+                .into_iter()
+                .chain(spec_vs.trainable_variables())
+                .chain([x.shallow_clone(), e.shallow_clone()])
+        };
+        let run = |as_built: bool| {
+            for mut t in all() {
+                t.zero_grad();
+            }
+            let y = if as_built {
+                block.forward(&x, cond, &mt).unwrap()
+            } else {
+                spec()
+            };
+            (&y * &r).sum(Kind::Double).backward();
+            // gradients by name: the block's vector MLP lives in `vs`, the
+            // specification's in `spec_vs`, under the same names
+            let mut grads: Vec<(String, Tensor)> = Vec::new();
+            for (name, t) in vs.variables() {
+                let owner = if !as_built && name.starts_with("vector.") {
+                    spec_vs.variables()[&name].shallow_clone()
+                } else {
+                    t
+                };
+                grads.push((name, owner.grad().copy()));
+            }
+            grads.push(("x".into(), x.grad().copy()));
+            if conditioned {
+                grads.push(("e".into(), e.grad().copy()));
+            }
+            grads.sort_by(|a, b| a.0.cmp(&b.0));
+            (y.detach(), grads)
+        };
+        let (built, built_grads) = run(true);
+        let (specified, spec_grads) = run(false);
+        let err = rel_max_diff(&built, &specified);
+        assert!(err < 1e-12, "W{w}: values differ by {err}");
+        assert!(built_grads.len() > 15);
+        for ((name, a), (_, b)) in built_grads.iter().zip(&spec_grads) {
+            let err = rel_max_diff(a, b);
+            assert!(err < 1e-10, "W{w}: gradient of {name} differs by {err}");
+        }
+    }
+}
+
+#[test]
 fn one_block_passes_finite_difference_checks() {
     tch::manual_seed(1);
     let mesh = procedural::icosphere(1);
