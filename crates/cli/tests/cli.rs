@@ -421,6 +421,22 @@ fn net_bench_prints_step_and_inference_medians() {
     assert!(text.contains("56000 parameters"), "{text}");
     assert!(text.contains("training step (median of 1)"), "{text}");
     assert!(text.contains("inference, batch 1 (median of 1)"), "{text}");
+    // a step does the products of 3 x batch forward passes
+    let sizes: Vec<usize> = text
+        .lines()
+        .find_map(|l| l.strip_prefix("mesh: "))
+        .unwrap()
+        .split(' ')
+        .take(3)
+        .filter_map(|w| w.parse().ok())
+        .collect();
+    let forward = mfm_net::PoissonNetConfig::small().forward_product_flops(sizes[0], sizes[1]);
+    let step = 3.0 * 2.0 * forward as f64 * 1e-9;
+    let line = format!(
+        "dense products: {} GFLOP per step",
+        mfm_net::bench::three_digits(step)
+    );
+    assert!(text.contains(&line), "expected {line:?} in {text}");
     let o = mfm(&["net", "bench", "builtin:icosphere:2", "--batch", "0"]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("--batch"), "{}", stderr(&o));

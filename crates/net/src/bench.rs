@@ -205,16 +205,16 @@ impl std::fmt::Display for BenchReport {
         if step_flops > 0.0 && !self.step_seconds.is_empty() {
             write!(
                 f,
-                "dense products: {:.1} GFLOP per step ({:.0} GFLOP/s over the whole step)",
-                step_flops * 1e-9,
+                "dense products: {} GFLOP per step ({:.0} GFLOP/s over the whole step)",
+                three_digits(step_flops * 1e-9),
                 step_flops * 1e-9 / self.median_step()
             )?;
             if !self.inference_seconds.is_empty() {
                 let inference_flops = self.forward_product_flops as f64;
                 write!(
                     f,
-                    ", {:.1} per inference ({:.0} GFLOP/s)",
-                    inference_flops * 1e-9,
+                    ", {} per inference ({:.0} GFLOP/s)",
+                    three_digits(inference_flops * 1e-9),
                     inference_flops * 1e-9 / self.median_inference()
                 )?;
             }
@@ -246,6 +246,26 @@ impl std::fmt::Display for BenchReport {
         }
         Ok(())
     }
+}
+
+/// `x` with three significant digits, or more where it has more integer
+/// digits.
+///
+/// ```
+/// use mfm_net::bench::three_digits;
+/// assert_eq!(three_digits(378.73), "379");
+/// assert_eq!(three_digits(15.78), "15.8");
+/// assert_eq!(three_digits(0.17094), "0.171");
+/// assert_eq!(three_digits(1234.4), "1234");
+/// assert_eq!(three_digits(0.0), "0");
+/// ```
+pub fn three_digits(x: f64) -> String {
+    let decimals = if x > 0.0 && x.is_finite() {
+        (2 - x.log10().floor() as i64).clamp(0, 9) as usize
+    } else {
+        0
+    };
+    format!("{x:.decimals$}")
 }
 
 /// Waits for queued GPU work so that timers measure it.
