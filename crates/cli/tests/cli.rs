@@ -415,10 +415,14 @@ fn net_bench_prints_step_and_inference_medians() {
         "1",
         "--threads",
         "1",
+        "--profile",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("56000 parameters"), "{text}");
+    // the profile finds the dense layers' sections (`fn:linear`, `fn:linear^T`)
+    assert!(text.contains("s per step in the dense layers"), "{text}");
+    assert!(text.contains("fn:linear^T"), "{text}");
     assert!(text.contains("training step (median of 1)"), "{text}");
     assert!(text.contains("inference, batch 1 (median of 1)"), "{text}");
     // a step does the products of 3 x batch forward passes

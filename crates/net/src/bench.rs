@@ -149,16 +149,15 @@ impl BenchReport {
     /// and sum passes around them); `None` without a profile or when no
     /// dense layer ran on the CPU.
     pub fn profiled_product_seconds(&self) -> Option<f64> {
-        const DENSE: [&str; 4] = [
-            "fn:linear",
-            "fn:linear^T",
-            "fn:complex_linear",
-            "fn:complex_linear^T",
-        ];
+        let dense_node = |section: &str| {
+            section.strip_prefix("fn:").is_some_and(|node| {
+                crate::dense::NODE_NAMES.contains(&node.strip_suffix("^T").unwrap_or(node))
+            })
+        };
         let total: f64 = self
             .sections
             .iter()
-            .filter(|r| DENSE.contains(&r.name.as_str()))
+            .filter(|r| dense_node(&r.name))
             .map(|r| r.wall)
             .sum();
         (total > 0.0).then_some(total)

@@ -28,6 +28,13 @@ use tch::{Device, Kind, Tensor};
 use crate::autograd::{CustomFunction, apply_custom, parallel_for};
 use crate::error::{Result, backward_before_forward, shape_error};
 
+/// Names of the dense layers' autograd nodes ([`linear`], [`complex_linear`]),
+/// so also of their profile sections `fn:<name>` and `fn:<name>^T`
+/// ([`crate::profile`]).
+pub(crate) const NODE_NAMES: [&str; 2] = [LINEAR_NODE, COMPLEX_LINEAR_NODE];
+const LINEAR_NODE: &str = "linear";
+const COMPLEX_LINEAR_NODE: &str = "complex_linear";
+
 /// Running total of [`counted_product_flops`].
 static PRODUCT_FLOPS: AtomicU64 = AtomicU64::new(0);
 
@@ -175,7 +182,7 @@ where
 
 impl CustomFunction for Linear {
     fn name(&self) -> &str {
-        "linear"
+        LINEAR_NODE
     }
 
     fn forward(&mut self, inputs: &[Tensor]) -> Result<Vec<Tensor>> {
@@ -199,8 +206,8 @@ impl CustomFunction for Linear {
                 count_products(n * k * o);
             }
         }
-        let _s = crate::profile::section("linear.bias");
         let out = if self.has_bias {
+            let _s = crate::profile::section("linear.bias");
             out + &inputs[2].detach()
         } else {
             out
@@ -213,7 +220,7 @@ impl CustomFunction for Linear {
         let (x, w) = self
             .saved
             .as_ref()
-            .ok_or_else(|| backward_before_forward("linear"))?;
+            .ok_or_else(|| backward_before_forward(LINEAR_NODE))?;
         let g = grad_outputs[0].contiguous();
         let (n, k) = rows_of(x);
         let o = w.size()[0] as usize;
@@ -568,7 +575,7 @@ where
 
 impl CustomFunction for ComplexLinearOp {
     fn name(&self) -> &str {
-        "complex_linear"
+        COMPLEX_LINEAR_NODE
     }
 
     fn forward(&mut self, inputs: &[Tensor]) -> Result<Vec<Tensor>> {
@@ -600,7 +607,7 @@ impl CustomFunction for ComplexLinearOp {
         let (z, w) = self
             .saved
             .as_ref()
-            .ok_or_else(|| backward_before_forward("complex_linear"))?;
+            .ok_or_else(|| backward_before_forward(COMPLEX_LINEAR_NODE))?;
         let g = grad_outputs[0].contiguous();
         let (n, k, o) = complex_dims(z, w);
         if n == 0 || k == 0 || o == 0 {
