@@ -53,7 +53,10 @@ pub struct DeformArgs {
         default_value = "matern:100,matern:0,white,naive,explicit:64:100"
     )]
     pub kinds: Vec<String>,
-    /// Training steps per kind (run preset `cpu-deform` otherwise).
+    /// Run preset of every kind's training (`mfm train --preset`).
+    #[arg(long, default_value = "cpu-deform")]
+    pub preset: String,
+    /// Training steps per kind (the preset's otherwise).
     #[arg(long, default_value_t = 1000)]
     pub steps: u64,
     /// Training shapes.
@@ -144,7 +147,7 @@ pub fn deform(env: &PyEnv, args: &DeformArgs) -> Result<()> {
     // 2. ablation
     let comparison = Comparison {
         out: &out,
-        preset: "cpu-deform",
+        preset: &args.preset,
         dataset: &data.join("train"),
         steps: args.steps,
         seed: args.seed,
@@ -191,29 +194,36 @@ pub fn deform(env: &PyEnv, args: &DeformArgs) -> Result<()> {
     writeln!(
         md,
         "Deformations at CPU scale: `mfm dataset deform` on `{mesh}` ({} training shapes on the \
-{}-face decimation, {} held-out shapes on its half-refined remeshing); run preset `cpu-deform`, \
+{}-face decimation, {} held-out shapes on its half-refined remeshing); run preset `{}`, \
 {} steps, seed {}.\n",
-        args.n, args.coarse_faces, args.reference, args.steps, args.seed
+        args.n, args.coarse_faces, args.reference, args.preset, args.steps, args.seed
     )?;
     writeln!(
         md,
-        "| noise | projection MSE x 1e4 | MMD | COV | 1-NNA | # params | train s | sample s |\n|---|---|---|---|---|---|---|---|"
+        "| noise | projection MSE x 1e4 median [q1, q3] (mean) | rotation spread / data's | translation spread / data's | MMD | COV | 1-NNA | # params | train s | sample s |\n|---|---|---|---|---|---|---|---|---|---|"
     )?;
     for AblationRow { result: r, params } in &rows {
         if r.failed() {
             // mfm's own message is in the log above and in table.json
             writeln!(
                 md,
-                "| {} | sampling failed (see the log) | | | | {} | {:.0} | {:.1} |",
+                "| {} | sampling failed (see the log) | | | | | | {} | {:.0} | {:.1} |",
                 r.kind, params, r.train_seconds, r.sample_seconds
             )?;
             continue;
         }
+        let q = &r.metrics["projection_mse_quartiles"];
+        let ratio = &r.metrics["spread_ratio"];
         writeln!(
             md,
-            "| {} | {:.3} | {:.4} | {:.3} | {:.3} | {} | {:.0} | {:.1} |",
+            "| {} | {:.2} [{:.2}, {:.2}] ({:.2}) | {:.2} | {:.2} | {:.4} | {:.3} | {:.3} | {} | {:.0} | {:.1} |",
             r.kind,
+            num(q, "median") * 1e4,
+            num(q, "q1") * 1e4,
+            num(q, "q3") * 1e4,
             num(&r.metrics, "projection_mse") * 1e4,
+            num(ratio, "rotation"),
+            num(ratio, "translation"),
             num(&r.metrics, "mmd"),
             num(&r.metrics, "cov"),
             num(&r.metrics, "one_nna"),

@@ -7,7 +7,10 @@
 //! (half refined twice). For each noise kind (default matern, white, naive)
 //! the same network is trained for the same number of steps with the same
 //! seed, then samples on the non-uniform mesh are compared to the reference
-//! set: GMM test error, MMD, COV, 1-NNA. Drives the release `mfm` binary (the
+//! set: the bump-fit quality (residual of a fit by the generator's own
+//! family, peak, bumps above half height, the fraction within twice the
+//! data's residual, diversity; `mfm_fm::quality`), GMM test error, MMD, COV,
+//! 1-NNA. Drives the release `mfm` binary (the
 //! xtask itself does not link libtorch). Writes `table.md`, `table.csv`,
 //! `table.json`, and per kind the run folder, the samples and
 //! `means_KIND.png` (point-wise mean, generated vs reference).
@@ -33,7 +36,10 @@ pub struct GmmArgs {
     /// Noise kinds to compare, comma-separated (mfm train --noise forms).
     #[arg(long, value_delimiter = ',', default_value = "matern:100,white,naive")]
     pub kinds: Vec<String>,
-    /// Training steps per kind (run preset `cpu` otherwise).
+    /// Run preset of every kind's training (`mfm train --preset`).
+    #[arg(long, default_value = "cpu")]
+    pub preset: String,
+    /// Training steps per kind (the preset's otherwise).
     #[arg(long, default_value_t = 1500)]
     pub steps: u64,
     /// Training signals.
@@ -73,7 +79,7 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
     let dataset_seconds = start.elapsed().as_secs_f64();
     let comparison = Comparison {
         out: &out,
-        preset: "cpu",
+        preset: &args.preset,
         dataset: &data.join("train"),
         steps: args.steps,
         seed: args.seed,
@@ -91,31 +97,54 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
     writeln!(
         md,
         "GMM at CPU scale: train on `{mesh}` (uniform), test on its half-refined remeshing; \
-{} training signals, {} reference and {} generated samples, run preset `cpu`, {} steps, seed {}.\n",
-        args.n, args.reference, args.reference, args.steps, args.seed
+{} training signals, {} reference and {} generated samples, run preset `{}`, {} steps, seed {}.\n",
+        args.n, args.reference, args.reference, args.preset, args.steps, args.seed
     )?;
     writeln!(
         md,
-        "| noise | test error | MMD | COV | 1-NNA | train s | sample s |\n|---|---|---|---|---|---|---|"
+        "| noise | bump-fit residual median [q1, q3] | peak median | bumps > 1/2 | data-like | diversity | test error | MMD | COV | 1-NNA | train s | sample s |\n|---|---|---|---|---|---|---|---|---|---|---|---|"
     )?;
-    let mut csv = String::from("noise,test_error,mmd,cov,one_nna,train_seconds,sample_seconds\n");
+    let mut csv = String::from(
+        "noise,residual_median,residual_q1,residual_q3,peak_median,bumps_above_half,within_twice_floor,diversity,test_error,mmd,cov,one_nna,train_seconds,sample_seconds\n",
+    );
+    let mut floor = None;
     for r in &rows {
         let (kind, m, tr, sa) = (&r.kind, &r.metrics, r.train_seconds, r.sample_seconds);
         if r.failed() {
             // mfm's own message is in the log above and in table.json
             writeln!(
                 md,
-                "| {kind} | sampling failed (see the log) | | | | {tr:.0} | {sa:.1} |"
+                "| {kind} | sampling failed (see the log) | | | | | | | | | {tr:.0} | {sa:.1} |"
             )?;
-            writeln!(csv, "{kind},,,,,{tr:.1},{sa:.2}")?;
+            writeln!(csv, "{kind},,,,,,,,,,,,{tr:.1},{sa:.2}")?;
             continue;
         }
+        let q = Quality::of(m);
+        floor.get_or_insert_with(|| Quality::reference_of(m));
         let [err, mmd, cov, nna] = ["test_error", "mmd", "cov", "one_nna"].map(|k| num(m, k));
         writeln!(
             md,
-            "| {kind} | {err:.4} | {mmd:.4} | {cov:.3} | {nna:.3} | {tr:.0} | {sa:.1} |"
+            "| {kind} | {:.3} [{:.3}, {:.3}] | {:.2} | {:.2} | {:.0}% | {:.2} | {err:.4} | {mmd:.4} | {cov:.3} | {nna:.3} | {tr:.0} | {sa:.1} |",
+            q.residual[1],
+            q.residual[0],
+            q.residual[2],
+            q.peak,
+            q.bumps,
+            100.0 * q.within,
+            q.diversity
         )?;
-        writeln!(csv, "{kind},{err},{mmd},{cov},{nna},{tr:.1},{sa:.2}")?;
+        writeln!(
+            csv,
+            "{kind},{},{},{},{},{},{},{},{err},{mmd},{cov},{nna},{tr:.1},{sa:.2}",
+            q.residual[1], q.residual[0], q.residual[2], q.peak, q.bumps, q.within, q.diversity
+        )?;
+    }
+    if let Some(d) = floor {
+        writeln!(
+            md,
+            "| reference set (the floor) | {:.3} [{:.3}, {:.3}] | {:.2} | {:.2} | | 1 | | | | | | |",
+            d.residual[1], d.residual[0], d.residual[2], d.peak, d.bumps
+        )?;
     }
     writeln!(
         md,
@@ -143,4 +172,42 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
     print!("{md}");
     println!("reproduce-figures gmm: wrote {}", out.display());
     Ok(())
+}
+
+/// The bump-fit columns of one `mfm eval` report (`quality`).
+struct Quality {
+    /// q1, median, q3 of the residual.
+    residual: [f64; 3],
+    peak: f64,
+    bumps: f64,
+    within: f64,
+    diversity: f64,
+}
+
+impl Quality {
+    fn set(q: &Value, within: f64, diversity: f64) -> Self {
+        let r = &q["residual"];
+        Self {
+            residual: [num(r, "q1"), num(r, "median"), num(r, "q3")],
+            peak: num(&q["peak"], "median"),
+            bumps: num(q, "bumps_above_half"),
+            within,
+            diversity,
+        }
+    }
+
+    /// The generated set's numbers.
+    fn of(metrics: &Value) -> Self {
+        let q = &metrics["quality"];
+        Self::set(
+            &q["generated"],
+            num(q, "within_twice_floor"),
+            num(q, "diversity"),
+        )
+    }
+
+    /// The reference set's numbers.
+    fn reference_of(metrics: &Value) -> Self {
+        Self::set(&metrics["quality"]["reference"], f64::NAN, 1.0)
+    }
 }

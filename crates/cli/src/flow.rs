@@ -12,9 +12,11 @@ use mfm_fm::deformations::{self, DeformManifest, DeformMeshes};
 use mfm_fm::experiment::GmmMeshes;
 use mfm_fm::gmm::{GenerateOptions, GmmConfig, GmmDistance, GmmGenerator};
 use mfm_fm::metrics::Metrics;
+use mfm_fm::quality::{GmmQualityReport, ParamSpread, Quartiles};
 use mfm_fm::sample::{SampleOptions, Sampler};
 use mfm_fm::train::Trainer;
 use mfm_fm::{InMemorySignals, SignalSource};
+use mfm_geometry::frame::CanonicalFrame;
 use mfm_geometry::render::{ColorRange, Colormap, GridOptions, Panel, RenderOptions};
 use mfm_geometry::{TriMesh, io, operators, render};
 use std::path::{Path, PathBuf};
@@ -274,6 +276,7 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
         a.seed,
         0..a.n,
         norm,
+        meshes.frame,
         "coarse",
         &format!(
             "mfm dataset deform: training shapes on the coarse mesh of {}",
@@ -289,6 +292,7 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
             held_out_seed,
             0..a.reference,
             norm,
+            meshes.frame,
             "eval",
             &format!(
                 "mfm dataset deform: held-out shapes on the evaluation mesh of {}",
@@ -303,6 +307,7 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
             held_out_seed,
             0..a.reference,
             norm,
+            meshes.frame,
             "coarse",
             &format!(
                 "mfm dataset deform: held-out shapes on the coarse mesh of {}",
@@ -380,12 +385,15 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
         progress_bar: true,
         on_progress: None,
     };
+    let frame = CanonicalFrame::of(&train_mesh)
+        .with_context(|| format!("placing the training mesh {source} in the canonical frame"))?;
     let write = |dir: &Path, mesh: &TriMesh, n: usize, seed: u64, role: &str| -> Result<Dataset> {
         let generator = GmmGenerator::new(mesh, &config)?;
         let signals = generator.generate_with(n, seed, &progress)?;
         let manifest = Manifest::new("gmm", config.manifest_params())
             .with_seed(seed)
-            .with_provenance(format!("mfm dataset gmm: {role} set on {source}"));
+            .with_provenance(format!("mfm dataset gmm: {role} set on {source}"))
+            .with_frame(frame);
         Ok(Dataset::write(dir, mesh, &signals, manifest)?)
     };
     let t0 = std::time::Instant::now();
@@ -515,6 +523,29 @@ pub fn train(a: TrainArgs) -> Result<()> {
         trainer.step(),
         trainer.config().train.steps
     );
+    let flow = trainer.flow();
+    if !flow.frame.is_identity() {
+        let sh = flow.frame.shift;
+        println!(
+            "frame: p -> {:.4} p + [{:.4}, {:.4}, {:.4}] (bounding box centred, largest extent 1){}; noise {} x {}{}",
+            flow.frame.scale,
+            sh[0],
+            sh[1],
+            sh[2],
+            if flow.positions {
+                ", positions moved with it"
+            } else {
+                ""
+            },
+            flow.noise,
+            flow.noise_scale,
+            if flow.centered {
+                ", noise and targets centred"
+            } else {
+                ""
+            }
+        );
+    }
     let summary = trainer.run(&stop, !a.quiet)?;
     println!(
         "steps {}..{} in {:.1} s ({:.3} s/step), last loss {}",
@@ -558,6 +589,12 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     }
     let mesh = load_mesh(&a.mesh)?;
     let sampler = Sampler::load(&a.run, Some(a.device.resolve()?))?;
+    for w in sampler.surface_warnings(&mesh) {
+        eprintln!(
+            "warning: {}: {w}; the run's frame assumes the sampling mesh is the training surface in the dataset's units",
+            a.mesh
+        );
+    }
     let run_config = RunConfig::from_toml_file(a.run.join(CONFIG_FILE)).ok();
     let mut opts = run_config
         .as_ref()
@@ -669,21 +706,48 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     }
     let mesh = reference.mesh().clone();
     let deform = DeformManifest::of(&reference)?;
+    let gmm = (reference.manifest().generator == mfm_fm::gmm::GENERATOR_NAME)
+        .then(|| GmmConfig::from_manifest_params(&reference.manifest().generator_params))
+        .transpose()
+        .with_context(|| format!("{}: the GMM parameters", reference_dir.display()))?;
     let ops = operators::Operators::new(&mesh)?;
     let mass: Vec<f64> = ops.mass.clone();
     let reference = reference.load_all()?;
     let metrics = Metrics::evaluate(&mass, &generated, &reference)?;
     let mut report = serde_json::to_value(&metrics)?;
+    if let (Some(config), 1) = (&gmm, generated.channels()) {
+        let generator = GmmGenerator::new(&mesh, config)?;
+        let q = GmmQualityReport::of(&generator, &mesh, &mass, &generated, &reference)?;
+        println!("{}", q.summary());
+        report["quality"] = serde_json::to_value(&q)?;
+        if let Some(png) = &a.png {
+            let side = sibling_png(png, "samples");
+            save_data_and_samples(&mesh, &reference, &generated, &q, &side)?;
+        }
+    }
     if let Some(d) = &deform {
         let p = deformations::plausibility(&d.space, &mesh, &generated, 4)?;
         let r = deformations::plausibility(&d.space, &mesh, &reference, 0)?;
+        let q = Quartiles::of(&p.mse);
+        let (gs, rs) = (ParamSpread::of(&p.params), ParamSpread::of(&r.params));
         println!(
-            "projection MSE (plausibility): generated mean {:.3e} median {:.3e}; reference mean {:.3e}",
-            p.mean, p.median, r.mean
+            "projection MSE (plausibility): generated median {:.3e} [{:.3e}, {:.3e}], mean {:.3e}; reference mean {:.3e}",
+            q.median, q.q1, q.q3, p.mean, r.mean
+        );
+        println!(
+            "handle-parameter spread of the projections: rotation {:.3} rad (data {:.3}), translation {:.4} (data {:.4})",
+            gs.rotation, rs.rotation, gs.translation, rs.translation
         );
         report["projection_mse"] = p.mean.into();
         report["projection_mse_median"] = p.median.into();
+        report["projection_mse_quartiles"] = serde_json::to_value(q)?;
         report["reference_projection_mse"] = r.mean.into();
+        report["param_spread"] = serde_json::to_value(gs)?;
+        report["reference_param_spread"] = serde_json::to_value(rs)?;
+        report["spread_ratio"] = serde_json::json!({
+            "rotation": gs.rotation / rs.rotation,
+            "translation": gs.translation / rs.translation,
+        });
         if let Some(png) = &a.png {
             save_projection_grid(&mesh, &generated, &p, png)?;
         }
@@ -813,6 +877,55 @@ fn save_projection_grid(
         &format!(
             "generated shapes and their projections, mean MSE {:.2e}",
             p.mean
+        ),
+        ColorRange::Auto,
+        png,
+    )
+}
+
+/// `dir/STEM_SUFFIX.png` for `dir/STEM.png`.
+fn sibling_png(png: &Path, suffix: &str) -> PathBuf {
+    png.with_file_name(format!(
+        "{}_{suffix}.png",
+        png.file_stem().and_then(|s| s.to_str()).unwrap_or("eval")
+    ))
+}
+
+/// The first 8 reference signals above the first 8 generated ones, on one
+/// colour scale, each captioned with its bump-fit residual and peak.
+fn save_data_and_samples(
+    mesh: &TriMesh,
+    reference: &InMemorySignals,
+    generated: &InMemorySignals,
+    q: &GmmQualityReport,
+    png: &Path,
+) -> Result<()> {
+    let k = 8;
+    let mut values: Vec<(Vec<f64>, String)> = Vec::new();
+    for (set, fits, name) in [
+        (reference, &q.reference.fits, "data"),
+        (generated, &q.generated.fits, "sample"),
+    ] {
+        for (i, f) in fits.iter().enumerate().take(set.len().min(k)) {
+            values.push((
+                channel(set, i, 0),
+                format!(
+                    "{name} {i}\nres {:.2} peak {:.2} bumps {}",
+                    f.residual, f.peak, f.bumps_above_half
+                ),
+            ));
+        }
+    }
+    let panels: Vec<Panel<'_>> = values
+        .iter()
+        .map(|(v, c)| Panel::new(mesh, Some(v.as_slice()), c.clone()))
+        .collect();
+    save_grid(
+        &panels,
+        4,
+        &format!(
+            "data (top) and generated (bottom), one colour scale; residual median {:.2} (data {:.2})",
+            q.generated.residual.median, q.floor
         ),
         ColorRange::Auto,
         png,

@@ -532,6 +532,22 @@ fn gmm_dataset_train_sample_eval_end_to_end() {
     let o = train_with_config(dir.path(), config);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(dir.path().join("run/model.safetensors").is_file());
+    // the run says which frame it trains in, and records it with the
+    // dataset's own
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        out.contains("largest extent 1") && out.contains("centred"),
+        "{out}"
+    );
+    let flow: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("run/flow.json")).unwrap())
+            .unwrap();
+    let manifest: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("data/train/manifest.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(flow["frame"], manifest["frame"], "{flow} {manifest}");
+    assert_eq!(flow["centered"], true);
     let log = std::fs::read_to_string(dir.path().join("run/train_log.csv")).unwrap();
     assert_eq!(log.lines().count(), 5, "header + 4 rows:\n{log}");
     // Training again into a finished run folder is refused.
@@ -620,6 +636,60 @@ fn gmm_dataset_train_sample_eval_end_to_end() {
         "{m}"
     );
     assert!(dir.path().join("means.png").is_file());
+    // the sample-quality fit: printed, in the JSON, and data beside samples
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("bump fit: residual median"),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let q = &m["quality"];
+    assert_eq!(q["generated"]["fits"].as_array().unwrap().len(), 5);
+    assert_eq!(q["reference"]["fits"].as_array().unwrap().len(), 6);
+    // the reference set is exactly in the generator's family
+    assert!(q["floor"].as_f64().unwrap() < 1e-3, "{q}");
+    assert!(
+        q["generated"]["residual"]["median"].as_f64().unwrap() > 0.1,
+        "{q}"
+    );
+    assert!(dir.path().join("means_samples.png").is_file());
+    // a sampling mesh of another size is flagged, naming both sizes
+    let scaled = p("scaled.ply");
+    let big = mfm_geometry::io::read_mesh(&test_mesh)
+        .unwrap()
+        .transformed(3.0, [0.0; 3]);
+    mfm_geometry::io::write_ply(&scaled, &big, &[]).unwrap();
+    let o = mfm(&[
+        "sample",
+        "--run",
+        &p("run"),
+        "--mesh",
+        &scaled,
+        "--n",
+        "1",
+        "--out",
+        &p("s_big"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("warning")
+            && stderr(&o).contains("differs from the training surface's"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(
+        !stderr(&mfm(&[
+            "sample",
+            "--run",
+            &p("run"),
+            "--mesh",
+            &test_mesh,
+            "--n",
+            "1",
+            "--out",
+            &p("s_same"),
+        ]))
+        .contains("warning")
+    );
     // Samples from another mesh do not fit the reference.
     let o = mfm(&[
         "eval",
@@ -764,6 +834,18 @@ fn deformation_dataset_trains_on_coarse_and_samples_on_finer_meshes() {
     );
     // an untrained model's shapes are far from the space; dataset shapes lie in it
     assert!(reference < 1e-3 * generated, "{m}");
+    // the spread of the projections' handle parameters, against the data's
+    for k in ["param_spread", "reference_param_spread"] {
+        assert!(m[k]["rotation"].as_f64().unwrap() >= 0.0, "{m}");
+    }
+    assert!(
+        m["reference_param_spread"]["rotation"].as_f64().unwrap() > 0.0,
+        "{m}"
+    );
+    assert!(
+        m["projection_mse_quartiles"]["median"].as_f64().unwrap() > 0.0,
+        "{m}"
+    );
     assert!(dir.path().join("shapes.png").is_file());
 
     // damage keeps the handles: holes and flips give meshes the model samples on

@@ -33,6 +33,7 @@ use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use mfm_geometry::frame::{CanonicalFrame, SurfaceSize};
 use mfm_noise::NoiseKind;
 use serde::{Deserialize, Serialize};
 
@@ -74,10 +75,31 @@ pub struct FlowSpec {
     /// Whether the network is conditioned on source xyz as well as `t`
     /// (conditioning `[x, y, z, t]` per vertex; otherwise `[t]`).
     pub condition_on_xyz: bool,
-    /// Constant per-channel velocity added to the network's vertex output
-    /// (`C` values; zeros when disabled), see
-    /// [`ModelConfig::mean_offset`](crate::config::ModelConfig::mean_offset).
+    /// The dataset's per-channel mean (`C` values; zeros when disabled),
+    /// added to every sample, see
+    /// [`ModelConfig::mean_offset`](crate::config::ModelConfig::mean_offset):
+    /// after the last ODE step when [`FlowSpec::centered`], as a constant
+    /// velocity otherwise.
     pub velocity_offset: Vec<f64>,
+    /// The training frame: the map from the dataset's units to the frame the
+    /// network saw ([`mfm_geometry::frame`]). Sampling meshes go through it
+    /// and position samples come back through its inverse. Identity for runs
+    /// written before frames existed.
+    #[serde(default)]
+    pub frame: CanonicalFrame,
+    /// Whether the signals are vertex positions (mapped by the frame) rather
+    /// than values (left alone). `false` for runs written before frames.
+    #[serde(default)]
+    pub positions: bool,
+    /// Whether noise and targets were centred by their mass-weighted means
+    /// ([`TrainConfig::center`](crate::config::TrainConfig::center));
+    /// `false` for runs written before centring.
+    #[serde(default)]
+    pub centered: bool,
+    /// Size of the training surface in the dataset's units, to tell a user
+    /// whose sampling mesh is not that surface (or not in those units).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub training_surface: Option<SurfaceSize>,
 }
 
 impl FlowSpec {
@@ -99,6 +121,22 @@ impl FlowSpec {
                     spec.velocity_offset.len(),
                     spec.channels
                 ),
+            ));
+        }
+        let f = spec.frame;
+        if !(f.scale.is_finite() && f.scale > 0.0 && f.shift.iter().all(|x| x.is_finite())) {
+            return Err(FmError::format(
+                path,
+                format!(
+                    "frame must have a finite scale > 0 and a finite shift, found scale {} and shift {:?}",
+                    f.scale, f.shift
+                ),
+            ));
+        }
+        if spec.positions && spec.channels != 3 {
+            return Err(FmError::format(
+                path,
+                format!("positions need 3 channels, the spec has {}", spec.channels),
             ));
         }
         if !(spec.noise_scale.is_finite() && spec.noise_scale > 0.0) {
@@ -457,6 +495,39 @@ pub fn newest_valid_checkpoint(run_dir: &Path) -> Result<NewestValid> {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn flow_specs_of_earlier_runs_read_as_identity_frame_and_uncentred() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(FLOW_FILE);
+        let old = r#"{"channels": 1, "noise": "matern:100", "noise_scale": 1.0,
+                      "condition_on_xyz": false, "velocity_offset": [0.25]}"#;
+        std::fs::write(&path, old).unwrap();
+        let spec = FlowSpec::read(&path).unwrap();
+        assert!(spec.frame.is_identity() && !spec.centered && !spec.positions);
+        assert_eq!(spec.training_surface, None);
+        // and a new spec round-trips with its frame
+        let mut new = spec.clone();
+        new.frame = CanonicalFrame {
+            scale: 0.5,
+            shift: [1.0, -2.0, 0.25],
+        };
+        new.centered = true;
+        new.training_surface = Some(SurfaceSize {
+            extent: 2.0,
+            area: 3.0,
+        });
+        new.write(&path).unwrap();
+        assert_eq!(FlowSpec::read(&path).unwrap(), new);
+        // a degenerate frame is refused, naming the file
+        let bad = old.replace(
+            "[0.25]}",
+            r#"[0.25], "frame": {"scale": 0.0, "shift": [0, 0, 0]}}"#,
+        );
+        std::fs::write(&path, bad).unwrap();
+        let e = FlowSpec::read(&path).unwrap_err().to_string();
+        assert!(e.contains("frame") && e.contains(FLOW_FILE), "{e}");
+    }
 
     fn state(step: u64) -> CheckpointState {
         CheckpointState {

@@ -11,6 +11,8 @@
 //! ```toml
 //! [dataset]
 //! path = "data/gmm"            # read by the caller (CLI); recorded here
+//! frame = "canonical"          # or "as-is"
+//! positions = true             # optional; default: 3 channels are positions
 //!
 //! [model]
 //! preset = "paper"             # PoissonNet preset: paper, medium, small
@@ -24,7 +26,7 @@
 //!
 //! [noise]
 //! kind = "matern:100"          # any form NoiseKind parses
-//! scale = 1.0                  # a factor, or "unit", or "data"
+//! scale = 3.0                  # sigma: a factor, or "unit", or "data"
 //!
 //! [train]
 //! steps = 160000
@@ -37,19 +39,23 @@
 //! seed = 0
 //! threads = 0
 //! device = "auto"
+//! center = true                # centred noise and targets
 //!
 //! [sample]
-//! steps = 32
+//! steps = 20
 //! method = "midpoint"
 //! batch = 8
 //! seed = 0
 //! ```
 //!
-//! [`RunConfig::default`] is the paper's training recipe (paper section 4 and
-//! its implementation details) on the paper's network, conditioned on `t`
-//! only; [`RunConfig::preset`] gives the named presets `paper` (the paper's
-//! deformation model, conditioned on source xyz and `t`) and `cpu` (a small
-//! network and a few hundred steps, about a minute on two cores).
+//! [`RunConfig::default`] is the official training recipe (paper section 4,
+//! its implementation details and the authors' configs: canonical frame,
+//! `matern:100` noise with `sigma = 3`, centred noise and targets, 20
+//! midpoint sampling steps) on the paper's network, conditioned on `t`
+//! only; [`RunConfig::preset`] gives the named presets `paper` and
+//! `paper-elastic` (the official human-pose and elastic models, conditioned
+//! on source xyz and `t`), `cpu` and `cpu-deform` (a small network and a
+//! few hundred steps, minutes on two cores).
 //!
 //! # Example
 //! ```
@@ -73,7 +79,7 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use crate::error::{FmError, Result};
 
 /// Names accepted by [`RunConfig::preset`].
-pub const PRESETS: [&str; 3] = ["paper", "cpu", "cpu-deform"];
+pub const PRESETS: [&str; 4] = ["paper", "paper-elastic", "cpu", "cpu-deform"];
 
 /// A training run: data, network, noise, optimization and sampling settings.
 ///
@@ -103,6 +109,36 @@ pub struct DatasetConfig {
     /// from so a run folder documents itself and the CLI can resume it.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub path: Option<PathBuf>,
+    /// Where training puts the surface before anything else (default
+    /// `canonical`): see [`FrameChoice`].
+    pub frame: FrameChoice,
+    /// Whether the signals are vertex positions (shapes), which move with
+    /// the frame and are mapped back to the dataset's units after sampling,
+    /// or values (scalars, colours), which the frame leaves alone. Default:
+    /// positions exactly when the signals have 3 channels.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub positions: Option<bool>,
+}
+
+impl DatasetConfig {
+    /// [`DatasetConfig::positions`], or its default for `channels`.
+    pub fn signals_are_positions(&self, channels: usize) -> bool {
+        self.positions.unwrap_or(channels == 3)
+    }
+}
+
+/// The frame a run trains in ([`mfm_geometry::frame`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FrameChoice {
+    /// The training mesh's bounding box centred at the origin with largest
+    /// extent 1, the frame of the official meshes, in which the paper's
+    /// `tau = 100` means a correlation length of a tenth of the shape. The
+    /// same map is applied to every sampling mesh.
+    #[default]
+    Canonical,
+    /// The mesh as the dataset stores it (`tau` then depends on its units).
+    AsIs,
 }
 
 /// `[model]`: the PoissonNet. Input and output channels follow the
@@ -133,18 +169,20 @@ pub struct ModelConfig {
     /// `t` (default `false`; the paper's deformation models use `true`).
     /// When sampling on another mesh, its positions are the source xyz.
     pub condition_on_xyz: bool,
-    /// Add a constant per-channel velocity, the dataset's mean
-    /// (mass-weighted over the surface, averaged over up to 256 evenly spaced
-    /// signals), to the network's vertex velocity (default `true`).
+    /// Restore the dataset's mean: the per-channel mean of the signals
+    /// (mass-weighted over the surface, averaged over up to 256 evenly
+    /// spaced signals, in the training frame) is added to every sample
+    /// (default `true`).
     ///
-    /// The NJF head removes the mass-weighted mean of its output, so without
-    /// this a sample keeps the (near zero) mean of its noise and can never
-    /// reach data whose mean is not zero (a field of positive bumps, a shape
-    /// away from the origin). With the offset, the straight path's expected
-    /// mean velocity `E[mean f_1] - E[mean f_0] = E[mean f_1]` is supplied
-    /// and the network learns the rest. It does not change the gradients
-    /// (the output is orthogonal to constants in the mass inner product), only
-    /// the reported loss and the samples. Ignored (zero) for the linear head.
+    /// The NJF head removes the mass-weighted mean of its output, so the
+    /// flow cannot move a sample's mean: without this, a sample keeps the
+    /// (zero or near zero) mean of its noise and can never reach data whose
+    /// mean is not zero (a field of positive bumps, a shape away from the
+    /// origin). With [`TrainConfig::center`] (the default) the flow runs
+    /// between centred noise and centred targets and the mean is added once,
+    /// after the last ODE step; without it the mean is added to the
+    /// network's vertex velocity at every step (integrating to the same
+    /// constant). Ignored (zero) for the linear head.
     pub mean_offset: bool,
 }
 
@@ -213,10 +251,14 @@ pub enum NoiseScale {
 }
 
 impl Default for NoiseScale {
+    /// `3.0`: the official recipe's `sigma` for elastic data.
     fn default() -> Self {
-        Self::Factor(1.0)
+        Self::Factor(DEFAULT_SIGMA)
     }
 }
+
+/// The default noise amplitude `sigma` ([`NoiseConfig::scale`]).
+pub const DEFAULT_SIGMA: f64 = 3.0;
 
 impl fmt::Display for NoiseScale {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -284,26 +326,28 @@ pub struct NoiseConfig {
     ///
     /// Default `matern:100`, the paper's `tau = 100` (used for all its
     /// experiments). `tau` has units of 1 / length²: the noise is smooth
-    /// over distances below about `1 / sqrt(tau) = 0.1`, a tenth of a
-    /// unit-sized shape, so it matches meshes normalized to about unit size
-    /// (as the paper's and this project's datasets are) and signals whose
-    /// features are a few tenths of the size across (Gaussian bumps, elastic
-    /// poses). For meshes of another scale use `matern-normalized:C`, which
-    /// adapts `tau` to the mesh, or rescale the mesh.
+    /// over distances below about `1 / sqrt(tau) = 0.1`, a tenth of the
+    /// shape in the canonical frame every run trains in
+    /// ([`FrameChoice::Canonical`], largest bounding-box extent 1, as the
+    /// official meshes). With `dataset.frame = "as-is"` it is a tenth of a
+    /// mesh unit, whatever the mesh's size; `matern-normalized:C` adapts
+    /// `tau` to each mesh instead and needs no frame.
     #[serde(with = "noise_kind_string")]
     pub kind: NoiseKind,
-    /// Factor applied to every noise sample (default `1.0`, the paper's
-    /// unscaled noise).
+    /// The noise amplitude `sigma`: every sample is `solve(L + tau M,
+    /// sigma sqrt(m) n)`, i.e. the unit-amplitude noise times `sigma` (the
+    /// solve is linear). Default `3.0`, the official recipe's value for its
+    /// elastic-deformation data (bunny and fish; `5.0` for human poses, the
+    /// `paper` preset).
     ///
     /// Magnitudes: Matérn noise on a smooth closed surface has pointwise
     /// variance close to `1 / (4 pi tau)` (the continuous Matérn field's), so
-    /// `matern:100` has a root-mean-square value of about `0.028`, much
-    /// smaller than signals of amplitude ~1; naive noise has 1 and white
-    /// noise `1 / sqrt(m_v)`, which grows with the vertex count. The paper
-    /// trains with the unscaled noise; `"unit"` (or a factor of about
-    /// `sqrt(4 pi tau)`, 35 for `tau = 100`) gives noise and data comparable
-    /// magnitudes, the usual choice in flow matching, and `"data"` matches
-    /// the data's spread exactly. See [`NoiseScale`].
+    /// `matern:100` at `sigma = 1` has a root-mean-square value of about
+    /// `0.028` and `sigma = 3` about `0.085`, well below signals of amplitude
+    /// ~1 (the path starts close to zero); naive noise has 1 and white noise
+    /// `1 / sqrt(m_v)`, which grows with the vertex count. `"unit"` gives
+    /// noise of unit root-mean-square value and `"data"` matches the data's
+    /// spread. See [`NoiseScale`].
     pub scale: NoiseScale,
 }
 
@@ -548,8 +592,16 @@ pub struct TrainConfig {
     /// `auto` (default), `cpu` or `cuda`.
     pub device: DeviceChoice,
     /// Random global scale and shift of the data (`[train.augment]`; off by
-    /// default). For position signals (deformations).
+    /// default, as in the official single-source recipe). For position
+    /// signals (deformations).
     pub augment: Augment,
+    /// Centre every noise sample and every training target by its
+    /// mass-weighted mean, per channel (default `true`, the official
+    /// recipe): the flow then carries no constant part, which the NJF head
+    /// cannot produce anyway, and the dataset's mean is added back after
+    /// sampling ([`ModelConfig::mean_offset`]). `false` keeps the raw noise
+    /// and targets and adds the mean as a constant velocity instead.
+    pub center: bool,
 }
 
 /// `[train.augment]`: data augmentation by a random global scale and shift
@@ -596,6 +648,7 @@ impl Default for TrainConfig {
             threads: 0,
             device: DeviceChoice::Auto,
             augment: Augment::default(),
+            center: true,
         }
     }
 }
@@ -638,7 +691,8 @@ impl std::str::FromStr for OdeMethod {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct SampleConfig {
-    /// ODE steps from `t = 0` to `t = 1` (default 32).
+    /// ODE steps from `t = 0` to `t = 1` (default 20: the official step
+    /// size 0.05).
     pub steps: usize,
     /// Integrator (default `midpoint`).
     pub method: OdeMethod,
@@ -651,7 +705,7 @@ pub struct SampleConfig {
 impl Default for SampleConfig {
     fn default() -> Self {
         Self {
-            steps: 32,
+            steps: 20,
             method: OdeMethod::Midpoint,
             batch: 8,
             seed: 0,
@@ -660,20 +714,26 @@ impl Default for SampleConfig {
 }
 
 impl RunConfig {
-    /// A named preset:
-    /// - `paper`: the paper's deformation model and recipe: PoissonNet
-    ///   `W = 128, K = 5, nl = 3` conditioned on source xyz and `t`,
-    ///   `matern:100` noise, batch 32, 160k steps, lr `5e-4` then `1e-4`
-    ///   from step 40k, gradient clipping at 1.
-    /// - `cpu`: a CPU-sized run of the same method: `W = 16, K = 2, nl = 2`,
-    ///   batch 4, 300 steps, lr `2e-3` then `5e-4` from step 200, a
-    ///   checkpoint every 100 steps, 16 midpoint steps for sampling, the
-    ///   paper's unscaled `matern:100` noise. About a
-    ///   minute of training on two cores at ~2k vertices.
-    /// - `cpu-deform`: `cpu` set up as the paper's deformation model:
-    ///   conditioned on the source xyz and `t`, augmented by a random global
-    ///   scale (+-10%) and shift (+-0.05, for meshes of unit diagonal), 1000
-    ///   steps with lr `2e-3` then `5e-4` from step 700.
+    /// A named preset. The `paper` ones are the official recipe
+    /// (kts707/Matern-FM's configs) on the paper's network, for a GPU; the
+    /// `cpu` ones the same method sized for two cores. All train in the
+    /// canonical frame with centred noise and targets, no augmentation
+    /// (the official single-source recipe) and sample with 20 midpoint
+    /// steps (step 0.05).
+    /// - `paper`: the human-pose model (official `moyo_fixed_source`):
+    ///   PoissonNet `W = 128, K = 5, nl = 3` conditioned on source xyz and
+    ///   `t`, `matern:100` noise with `sigma = 5`, batch 32, 160k steps, lr
+    ///   `5e-4` times 0.2 from step 40k, gradient clipping at 1.
+    /// - `paper-elastic`: the elastic-deformation model (official
+    ///   `stanford_bunny` and `fish`): as `paper` with `sigma = 3`, batch
+    ///   40, lr `5e-4` times 0.2 at steps 5k and 140k.
+    /// - `cpu`: scalar signals (the GMM experiment) on `W = 16, K = 2,
+    ///   nl = 2`, conditioned on `t`, batch 4, 300 steps, lr `2e-3` then
+    ///   `5e-4` from step 200, a checkpoint every 100 steps, `sigma = 3`.
+    ///   About a minute of training on two cores at ~2k vertices.
+    /// - `cpu-deform`: `cpu` set up as the deformation models: conditioned
+    ///   on the source xyz and `t`, 1000 steps with lr `2e-3` then `5e-4`
+    ///   from step 700.
     ///
     /// # Errors
     /// [`FmError::Config`] naming the known presets.
@@ -682,6 +742,21 @@ impl RunConfig {
             "paper" => {
                 let mut c = Self::default();
                 c.model.condition_on_xyz = true;
+                c.noise.scale = NoiseScale::Factor(5.0);
+                c.train.lr_schedule = LrSchedule::Decay {
+                    factor: 0.2,
+                    at: vec![40_000],
+                };
+                Ok(c)
+            }
+            "paper-elastic" => {
+                let mut c = Self::preset("paper")?;
+                c.noise.scale = NoiseScale::Factor(3.0);
+                c.train.batch = 40;
+                c.train.lr_schedule = LrSchedule::Decay {
+                    factor: 0.2,
+                    at: vec![5_000, 140_000],
+                };
                 Ok(c)
             }
             "cpu" => {
@@ -703,10 +778,6 @@ impl RunConfig {
                         log_every: 10,
                         ..base.train
                     },
-                    sample: SampleConfig {
-                        steps: 16,
-                        ..base.sample
-                    },
                     ..base
                 })
             }
@@ -715,10 +786,6 @@ impl RunConfig {
                 c.model.condition_on_xyz = true;
                 c.train.steps = 1000;
                 c.train.lr_schedule = LrSchedule::Milestones(vec![(700, 5e-4)]);
-                c.train.augment = Augment {
-                    scale: 0.1,
-                    shift: 0.05,
-                };
                 Ok(c)
             }
             other => Err(FmError::Config(format!(

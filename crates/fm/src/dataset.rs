@@ -48,6 +48,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use mfm_geometry::TriMesh;
+use mfm_geometry::frame::CanonicalFrame;
 use mfm_geometry::io::{read_mesh, write_ply};
 use npyz::WriterBuilder;
 use serde::{Deserialize, Serialize};
@@ -100,6 +101,12 @@ pub struct Manifest {
     /// Free-form provenance (command line, source mesh, date, notes).
     #[serde(default)]
     pub provenance: String,
+    /// The canonical frame of the experiment's training surface
+    /// ([`mfm_geometry::frame`]), in the units of this dataset's mesh:
+    /// training moves the surface (and position signals) through it first.
+    /// Recorded by the dataset generators; absent in older datasets.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame: Option<CanonicalFrame>,
 }
 
 impl Manifest {
@@ -117,7 +124,15 @@ impl Manifest {
             seed: None,
             tool_version: concat!("mfm-fm ", env!("CARGO_PKG_VERSION")).to_string(),
             provenance: String::new(),
+            frame: None,
         }
+    }
+
+    /// Records the training surface's canonical frame.
+    #[must_use]
+    pub fn with_frame(mut self, frame: CanonicalFrame) -> Self {
+        self.frame = Some(frame);
+        self
     }
 
     /// Sets the seed.

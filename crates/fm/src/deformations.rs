@@ -32,6 +32,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use mfm_deform::{Arap, DeformParams, DeformSpace, HandleSet, normalize_rest, project};
 use mfm_geometry::TriMesh;
 use mfm_geometry::decimate::decimate;
+use mfm_geometry::frame::CanonicalFrame;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -61,6 +62,9 @@ pub struct DeformMeshes {
     /// The map `p -> scale * p + shift` that took the user's mesh to
     /// `original` (from [`normalize_rest`]).
     pub normalization: Normalization,
+    /// The canonical frame of `coarse`, the training surface (recorded in
+    /// every dataset of the experiment).
+    pub frame: CanonicalFrame,
 }
 
 /// The similarity that took the user's mesh to [`DeformMeshes::original`]
@@ -99,7 +103,10 @@ impl DeformMeshes {
             original.clone()
         };
         let eval = GmmMeshes::from_base(coarse.clone(), HalfDensity::default())?.test;
+        let frame = CanonicalFrame::of(&coarse)
+            .map_err(|e| mesh_error("placing the coarse mesh in the canonical frame", e))?;
         Ok(Self {
+            frame,
             original,
             coarse,
             eval,
@@ -152,7 +159,8 @@ impl DeformManifest {
 }
 
 /// Generates samples `range` of `seed` on `mesh` and writes them as a
-/// dataset folder `dir` (mesh, `signals.npy` `[N, V, 3]` f32, manifest) plus
+/// dataset folder `dir` (mesh, `signals.npy` `[N, V, 3]` f32, manifest
+/// recording `frame`, the training surface's canonical frame) plus
 /// [`PARAMS_FILE`]. Shows a progress bar when `progress` is set.
 ///
 /// Cost: one ARAP factorization of `mesh`, then per sample a few tens of
@@ -169,6 +177,7 @@ pub fn write_dataset(
     seed: u64,
     range: Range<usize>,
     normalization: Normalization,
+    frame: CanonicalFrame,
     mesh_role: &str,
     provenance: &str,
     progress: bool,
@@ -211,7 +220,8 @@ pub fn write_dataset(
         serde_json::to_value(&params).map_err(|e| FmError::Config(e.to_string()))?,
     )
     .with_seed(seed)
-    .with_provenance(provenance);
+    .with_provenance(provenance)
+    .with_frame(frame);
     let dataset = Dataset::write(dir, mesh, &signals, manifest)?;
     let all: Vec<&DeformParams> = shapes.iter().map(|s| &s.params).collect();
     let path = dataset.dir().join(PARAMS_FILE);
@@ -254,6 +264,10 @@ pub struct Plausibility {
     /// The projections of the first `keep` shapes (see [`plausibility`]).
     #[serde(skip)]
     pub projections: Vec<Vec<[f64; 3]>>,
+    /// The fitted parameters of every shape's projection, in order (their
+    /// spread: [`crate::quality::ParamSpread`]).
+    #[serde(skip)]
+    pub params: Vec<DeformParams>,
 }
 
 /// Projects every signal of `shapes` (3 channels: positions on `mesh`) onto
@@ -287,10 +301,17 @@ pub fn plausibility(
         .into_par_iter()
         .map(|i| {
             let p = project(&arap, space, &shapes.positions(i))?;
-            Ok((p.mse, (i < keep).then_some(p.positions)))
+            Ok((p.mse, (i < keep).then_some(p.positions), p.params))
         })
         .collect::<Result<Vec<_>>>()?;
-    let (mse, kept): (Vec<f64>, Vec<_>) = results.into_iter().unzip();
+    let mut mse = Vec::with_capacity(results.len());
+    let mut kept = Vec::with_capacity(results.len());
+    let mut params = Vec::with_capacity(results.len());
+    for (m, k, p) in results {
+        mse.push(m);
+        kept.push(k);
+        params.push(p);
+    }
     let projections = kept.into_iter().flatten().collect();
     let mean = mse.iter().sum::<f64>() / mse.len().max(1) as f64;
     let mut sorted = mse.clone();
@@ -305,6 +326,7 @@ pub fn plausibility(
         mean,
         median,
         projections,
+        params,
     })
 }
 

@@ -454,6 +454,24 @@ impl GmmGenerator {
         Ok((centers, fields))
     }
 
+    /// One bump of the generator's family centred at vertex `center`:
+    /// `exp(-d(x, c)^2 / (2 sigma^2))` at every vertex (the distance field
+    /// is cached like the generator's own).
+    ///
+    /// # Errors
+    /// As [`GmmGenerator::distance_field`].
+    pub fn bump(&self, center: usize) -> Result<Vec<f64>> {
+        let field = self.distance_field(center)?;
+        let inv = 1.0 / (2.0 * self.sigma * self.sigma);
+        Ok(field
+            .iter()
+            .map(|&d| {
+                let d = f64::from(d);
+                (-d * d * inv).exp()
+            })
+            .collect())
+    }
+
     /// The bump centers (vertex indices) of sample `index` of `seed`, in the
     /// order they were placed.
     ///

@@ -8,9 +8,22 @@
 //!   network evaluations per step, error `O(h^2)`;
 //! - Euler: `f <- f + h v(f, t)`, one evaluation, error `O(h)`.
 //!
-//! `v(f, t)` is the network's vertex output plus the run's constant
-//! per-channel velocity offset, with the network conditioned on `t` (and the
-//! target mesh's vertex positions when the run was trained that way).
+//! `v(f, t)` is the network's vertex output, with the network conditioned
+//! on `t` (and the target mesh's vertex positions when the run was trained
+//! that way).
+//!
+//! The frame: the target mesh is first moved by the run's training frame
+//! ([`FlowSpec::frame`]; the map fixed on the training mesh, so the target
+//! must be in the units of the training data), the noise is drawn and the
+//! ODE integrated there, and position samples are mapped back to the
+//! target's units at the end; values are left as they are.
+//! [`Sampler::surface_warnings`] tells when a target's size does not match
+//! the training surface's.
+//!
+//! The mean: for a centred run ([`FlowSpec::centered`], the default) the
+//! noise is centred by its mass-weighted mean and the dataset's mean
+//! ([`FlowSpec::velocity_offset`]) is added after the last step; for an
+//! uncentred run it is added to the velocity at every step.
 //!
 //! Entry points: [`Sampler::load`] (a run folder: its final model, or its
 //! newest valid checkpoint), [`Sampler::sample`] (`[N, V, C]` values for a
@@ -26,6 +39,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use mfm_geometry::TriMesh;
+use mfm_geometry::frame::SurfaceSize;
 use mfm_net::{MeshTensors, PoissonNet};
 use mfm_noise::NoiseSampler;
 use tch::{Device, Kind, Tensor};
@@ -33,6 +47,11 @@ use tch::{Device, Kind, Tensor};
 use crate::checkpoint::{self, FLOW_FILE, FlowSpec, WEIGHTS_FILE};
 use crate::config::{DeviceChoice, OdeMethod, SampleConfig};
 use crate::error::{FmError, Result};
+use crate::train::{center_by_mass, mass_weights};
+
+/// Relative size difference above which [`Sampler::surface_warnings`]
+/// speaks up.
+pub const SURFACE_TOLERANCE: f64 = 0.05;
 
 /// How to integrate: steps, method, batch size.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -103,6 +122,8 @@ pub struct TargetMesh {
     mesh: MeshTensors,
     noise: NoiseSampler,
     xyz: Tensor,
+    /// Normalized lumped mass `[1, V, 1]` (centring).
+    weights: Tensor,
 }
 
 impl TargetMesh {
@@ -281,11 +302,25 @@ impl Sampler {
     /// # Errors
     /// Operator, factorization or noise errors of the mesh.
     pub fn prepare(&self, mesh: &TriMesh) -> Result<TargetMesh> {
+        let framed = self.flow.frame.apply(mesh);
+        let noise = NoiseSampler::new(&framed, self.flow.noise)?;
         Ok(TargetMesh {
-            mesh: MeshTensors::new(mesh)?,
-            noise: NoiseSampler::new(mesh, self.flow.noise)?,
-            xyz: positions_tensor(mesh, self.net.device()),
+            mesh: MeshTensors::new(&framed)?,
+            weights: mass_weights(noise.mass(), self.net.device()),
+            noise,
+            xyz: positions_tensor(&framed, self.net.device()),
         })
+    }
+
+    /// Why `mesh` may not be the training surface in the training data's
+    /// units: one line per size measure (largest bounding-box extent, area)
+    /// that differs by more than 5%, naming both values. Empty when they
+    /// agree or the run does not record its training surface.
+    pub fn surface_warnings(&self, mesh: &TriMesh) -> Vec<String> {
+        match &self.flow.training_surface {
+            Some(train) => train.mismatches(&SurfaceSize::of(mesh), SURFACE_TOLERANCE),
+            None => Vec::new(),
+        }
     }
 
     /// Generates `count` samples on `mesh` from `seed`: `[count, V, C]`.
@@ -332,7 +367,7 @@ impl Sampler {
             let t0 = Instant::now();
             let x0 = self.noise(target, first + done, b, seed)?;
             noise_seconds += t0.elapsed().as_secs_f64();
-            let x1 = self.integrate(target, &x0, options)?;
+            let x1 = self.finish(&self.integrate(target, &x0, options)?);
             let flat = x1.to_device(Device::Cpu).contiguous().view([-1]);
             let values = Vec::<f32>::try_from(&flat)?;
             data.extend_from_slice(&values);
@@ -348,9 +383,30 @@ impl Sampler {
         })
     }
 
+    /// The end of the ODE (`[B, V, C]`, in the training frame) as samples
+    /// in the target's units: plus the dataset mean for a centred run, then,
+    /// for positions, through the inverse of the frame.
+    pub fn finish(&self, x: &Tensor) -> Tensor {
+        let mut x = x.shallow_clone();
+        if self.flow.centered
+            && let Some(o) = &self.offset
+        {
+            x = &x + o;
+        }
+        let frame = self.flow.frame;
+        if self.flow.positions && !frame.is_identity() {
+            let shift = Tensor::from_slice(&frame.shift.map(|v| v as f32))
+                .reshape([1, 1, 3])
+                .to_device(x.device());
+            x = (x - shift) * (1.0 / frame.scale);
+        }
+        x
+    }
+
     /// The starting noise of samples `first .. first + count` of `seed` on
     /// the target: `[count, V, C]` `f32` on the network's device (the run's
-    /// noise kind, times its scale).
+    /// noise kind, times its scale, centred by its mass-weighted mean for a
+    /// centred run).
     ///
     /// # Errors
     /// Noise sampling errors.
@@ -368,9 +424,14 @@ impl Sampler {
         if scale != 1.0 {
             values.iter_mut().for_each(|x| *x *= scale);
         }
-        Ok(Tensor::from_slice(&values)
+        let x = Tensor::from_slice(&values)
             .reshape([count as i64, v, c as i64])
-            .to_device(self.net.device()))
+            .to_device(self.net.device());
+        Ok(if self.flow.centered {
+            center_by_mass(&x, &target.weights)
+        } else {
+            x
+        })
     }
 
     /// The velocity `v(x, t)` at time `t` for a batch `x: [B, V, C]` (no
@@ -383,9 +444,9 @@ impl Sampler {
         let tt = Tensor::full([b], t, (Kind::Float, x.device()));
         let cond = conditioning(&self.flow, &target.xyz, &tt);
         let out = tch::no_grad(|| self.net.forward(&target.mesh, x, Some(&cond)))?;
-        Ok(match &self.offset {
-            Some(o) => out.vertex + o,
-            None => out.vertex,
+        Ok(match (&self.offset, self.flow.centered) {
+            (Some(o), false) => out.vertex + o,
+            _ => out.vertex,
         })
     }
 

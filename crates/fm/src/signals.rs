@@ -145,6 +145,63 @@ impl SignalSource for InMemorySignals {
     }
 }
 
+/// Position signals (3 channels) read through a similarity: every vertex
+/// `p` of a signal of `inner` comes out as `frame.to_canonical(p)`. What
+/// training reads when a dataset of shapes is put in the canonical frame
+/// ([`mfm_geometry::frame`]); the values are converted in `f64` and rounded
+/// once to `f32`.
+pub struct FramedPositions {
+    inner: std::sync::Arc<dyn SignalSource>,
+    frame: mfm_geometry::frame::CanonicalFrame,
+}
+
+impl FramedPositions {
+    /// Wraps `inner`, whose signals must have 3 channels.
+    ///
+    /// # Errors
+    /// [`FmError::SizeMismatch`] when `inner` does not have 3 channels.
+    pub fn new(
+        inner: std::sync::Arc<dyn SignalSource>,
+        frame: mfm_geometry::frame::CanonicalFrame,
+    ) -> Result<Self> {
+        if inner.channels() != 3 {
+            return Err(FmError::SizeMismatch {
+                what: "channels of position signals".into(),
+                expected: 3,
+                found: inner.channels(),
+            });
+        }
+        Ok(Self { inner, frame })
+    }
+}
+
+impl SignalSource for FramedPositions {
+    fn len(&self) -> usize {
+        self.inner.len()
+    }
+
+    fn num_vertices(&self) -> usize {
+        self.inner.num_vertices()
+    }
+
+    fn channels(&self) -> usize {
+        3
+    }
+
+    fn read_into(&self, indices: &[usize], out: &mut [f32]) -> Result<()> {
+        self.inner.read_into(indices, out)?;
+        for p in out.chunks_exact_mut(3) {
+            let q = self
+                .frame
+                .to_canonical([f64::from(p[0]), f64::from(p[1]), f64::from(p[2])]);
+            for k in 0..3 {
+                p[k] = q[k] as f32;
+            }
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {

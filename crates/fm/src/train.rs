@@ -1,16 +1,24 @@
 //! Training a PoissonNet velocity field by rectified flow matching
 //! (DESIGN.md section 6, paper section 4).
 //!
+//! Before anything else the training mesh goes to the run's frame
+//! ([`crate::config::FrameChoice`], by default the canonical frame of
+//! [`mfm_geometry::frame`]: bounding box centred, largest extent 1), and so do
+//! position signals; the map is stored in `flow.json`.
+//!
 //! One step on a batch of `B` signals `f_1` (`[B, V, C]`) of the training
-//! mesh:
-//! 1. `f_0`: noise on the training mesh (the run's kind, times its scale),
+//! mesh, all in the frame:
+//! 1. `f_0`: noise on the training mesh (the run's kind, times its scale
+//!    `sigma`: by linearity `solve(L + tau M, sigma sqrt(m) n)`),
 //!    `t ~ U[0, 1)` per batch item;
-//! 2. `f_t = (1 - t) f_0 + t f_1`, target `delta = f_1 - f_0`;
-//! 3. `(v, J) = net(f_t | t [, source xyz])`, `v` plus the run's constant
-//!    velocity offset;
-//! 4. loss: [`mfm_net::loss::flow_matching_loss`] (mass-weighted MSE of `v`
+//! 2. with `train.center` (the default), `f_0` and `f_1` each minus its
+//!    mass-weighted mean per channel;
+//! 3. `f_t = (1 - t) f_0 + t f_1`, target `delta = f_1 - f_0`;
+//! 4. `(v, J) = net(f_t | t [, source xyz])`, `v` plus the run's constant
+//!    velocity offset when not centring;
+//! 5. loss: [`mfm_net::loss::flow_matching_loss`] (mass-weighted MSE of `v`
 //!    against `delta` plus area-weighted MSE of `J` against `G delta`);
-//! 5. backward, clip the global gradient norm, one [`Adam`] step at the
+//! 6. backward, clip the global gradient norm, one [`Adam`] step at the
 //!    scheduled learning rate. Everything is `f32`.
 //!
 //! ## Determinism and resuming
@@ -62,6 +70,7 @@ use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use mfm_geometry::TriMesh;
+use mfm_geometry::frame::{CanonicalFrame, SurfaceSize};
 use mfm_net::{HeadKind, MeshTensors, PoissonNet, loss};
 use mfm_noise::NoiseSampler;
 use rand::{Rng, SeedableRng};
@@ -72,10 +81,10 @@ use crate::checkpoint::{
     self, CONFIG_FILE, CheckpointState, FLOW_FILE, FlowSpec, LOG_FILE, LogAccumulator,
     OPTIMIZER_FILE, WEIGHTS_FILE,
 };
-use crate::config::{DeviceChoice, NoiseScale, RunConfig};
+use crate::config::{DeviceChoice, FrameChoice, NoiseScale, RunConfig};
 use crate::error::{FmError, Result};
 use crate::sample::{conditioning, offset_tensor, positions_tensor};
-use crate::signals::SignalSource;
+use crate::signals::{FramedPositions, SignalSource};
 
 /// Header of the training log.
 pub const LOG_HEADER: &str = "step,loss,lr,grad_norm,seconds";
@@ -403,7 +412,10 @@ pub struct Trainer {
     device: Device,
     mesh: MeshTensors,
     xyz: Tensor,
+    /// The velocity offset added in training (uncentred runs only).
     offset: Option<Tensor>,
+    /// Normalized lumped mass `[1, V, 1]`, for centring.
+    weights: Tensor,
     signals: Arc<dyn SignalSource>,
     noise: NoiseSampler,
     net: PoissonNet,
@@ -509,6 +521,7 @@ fn resolve_flow(
     config: &RunConfig,
     noise: &NoiseSampler,
     signals: &dyn SignalSource,
+    frame: TrainingFrame,
 ) -> Result<FlowSpec> {
     let c = signals.channels();
     let (mean, data_rms) = data_statistics(signals, noise.mass())?;
@@ -537,7 +550,72 @@ fn resolve_flow(
         noise_scale,
         condition_on_xyz: config.model.condition_on_xyz,
         velocity_offset: if offset_on { mean } else { vec![0.0; c] },
+        frame: frame.frame,
+        positions: frame.positions,
+        centered: config.train.center,
+        training_surface: Some(frame.size),
     })
+}
+
+/// How a new run's training mesh and signals enter the training frame.
+#[derive(Clone, Copy, Debug)]
+struct TrainingFrame {
+    frame: CanonicalFrame,
+    positions: bool,
+    size: SurfaceSize,
+}
+
+impl TrainingFrame {
+    fn resolve(config: &RunConfig, mesh: &TriMesh, channels: usize) -> Result<Self> {
+        let frame = match config.dataset.frame {
+            FrameChoice::Canonical => CanonicalFrame::of(mesh).map_err(|e| {
+                FmError::Config(format!("the training mesh has no canonical frame: {e}"))
+            })?,
+            FrameChoice::AsIs => CanonicalFrame::identity(),
+        };
+        let positions = config.dataset.signals_are_positions(channels);
+        if positions && channels != 3 {
+            return Err(FmError::Config(format!(
+                "dataset.positions = true needs 3-channel signals, the dataset has {channels}"
+            )));
+        }
+        Ok(Self {
+            frame,
+            positions,
+            size: SurfaceSize::of(mesh),
+        })
+    }
+}
+
+/// The training mesh and signals in the flow's frame.
+fn in_frame(
+    flow: &FlowSpec,
+    mesh: &TriMesh,
+    signals: Arc<dyn SignalSource>,
+) -> Result<(TriMesh, Arc<dyn SignalSource>)> {
+    let framed = flow.frame.apply(mesh);
+    if flow.positions && !flow.frame.is_identity() {
+        let s: Arc<dyn SignalSource> = Arc::new(FramedPositions::new(signals, flow.frame)?);
+        Ok((framed, s))
+    } else {
+        Ok((framed, signals))
+    }
+}
+
+/// Removes each item's per-channel mean, weighted by `weights` (`[1, V, 1]`,
+/// summing to 1), from `x: [B, V, C]`.
+pub(crate) fn center_by_mass(x: &Tensor, weights: &Tensor) -> Tensor {
+    let mean = (x * weights).sum_dim_intlist([1i64].as_slice(), true, x.kind());
+    x - mean
+}
+
+/// The lumped mass of `mesh` divided by its total, as `[1, V, 1]` `f32`.
+pub(crate) fn mass_weights(mass: &[f64], device: Device) -> Tensor {
+    let total: f64 = mass.iter().sum();
+    let w: Vec<f32> = mass.iter().map(|m| (m / total) as f32).collect();
+    Tensor::from_slice(&w)
+        .reshape([1, mass.len() as i64, 1])
+        .to_device(device)
 }
 
 /// Rewrites the log keeping the header and the rows with `step <= keep`
@@ -600,13 +678,37 @@ impl Trainer {
                 run_dir.display()
             )));
         }
+        let frame = TrainingFrame::resolve(&config, mesh, signals.channels())?;
         std::fs::create_dir_all(&run_dir).map_err(|e| FmError::io(&run_dir, e))?;
         config.write_toml_file(run_dir.join(CONFIG_FILE))?;
-        let noise = NoiseSampler::new(mesh, config.noise.kind)?;
-        let flow = resolve_flow(&config, &noise, signals.as_ref())?;
+        Self::start(run_dir, config, frame, mesh, signals)
+    }
+
+    /// Resolves and writes the flow spec of a fresh run, then builds it.
+    fn start(
+        run_dir: PathBuf,
+        config: RunConfig,
+        frame: TrainingFrame,
+        mesh: &TriMesh,
+        signals: Arc<dyn SignalSource>,
+    ) -> Result<Self> {
+        let provisional = FlowSpec {
+            channels: signals.channels(),
+            noise: config.noise.kind,
+            noise_scale: 1.0,
+            condition_on_xyz: config.model.condition_on_xyz,
+            velocity_offset: vec![0.0; signals.channels()],
+            frame: frame.frame,
+            positions: frame.positions,
+            centered: config.train.center,
+            training_surface: Some(frame.size),
+        };
+        let (framed_mesh, framed_signals) = in_frame(&provisional, mesh, signals)?;
+        let noise = NoiseSampler::new(&framed_mesh, config.noise.kind)?;
+        let flow = resolve_flow(&config, &noise, framed_signals.as_ref(), frame)?;
         flow.write(run_dir.join(FLOW_FILE))?;
         truncate_log(&run_dir.join(LOG_FILE), 0)?;
-        Self::build(run_dir, config, flow, mesh, signals, noise)
+        Self::build(run_dir, config, flow, &framed_mesh, framed_signals, noise)
     }
 
     /// Continues the run in `run_dir` from its newest valid checkpoint, with
@@ -694,8 +796,9 @@ impl Trainer {
                 found: signals.channels(),
             });
         }
-        let noise = NoiseSampler::new(mesh, config.noise.kind)?;
-        let mut t = Self::build(run_dir, config, flow, mesh, signals, noise)?;
+        let (framed_mesh, framed_signals) = in_frame(&flow, mesh, signals)?;
+        let noise = NoiseSampler::new(&framed_mesh, config.noise.kind)?;
+        let mut t = Self::build(run_dir, config, flow, &framed_mesh, framed_signals, noise)?;
         t.net.load_weights(info.dir.join(WEIGHTS_FILE))?;
         t.adam.load(&info.dir.join(OPTIMIZER_FILE), state.step)?;
         t.step = state.step;
@@ -721,13 +824,12 @@ impl Trainer {
     ) -> Result<Self> {
         config.validate()?;
         check_signals(mesh, signals.as_ref())?;
-        let noise = NoiseSampler::new(mesh, config.noise.kind)?;
-        let flow = resolve_flow(&config, &noise, signals.as_ref())?;
-        flow.write(run_dir.join(FLOW_FILE))?;
-        truncate_log(&run_dir.join(LOG_FILE), 0)?;
-        Self::build(run_dir, config, flow, mesh, signals, noise)
+        let frame = TrainingFrame::resolve(&config, mesh, signals.channels())?;
+        Self::start(run_dir, config, frame, mesh, signals)
     }
 
+    /// Builds a run from its flow spec; `mesh`, `signals` and `noise` are
+    /// already in the flow's frame.
     fn build(
         run_dir: PathBuf,
         config: RunConfig,
@@ -760,7 +862,12 @@ impl Trainer {
         let order = EpochOrder::new(t.seed, signals.len());
         Ok(Self {
             xyz: positions_tensor(mesh, device),
-            offset: offset_tensor(&flow, device),
+            offset: if flow.centered {
+                None
+            } else {
+                offset_tensor(&flow, device)
+            },
+            weights: mass_weights(noise.mass(), device),
             run_dir,
             flow,
             device,
@@ -896,6 +1003,14 @@ impl Trainer {
         let (x1, xyz) = match self.augmentation(s, b) {
             Some((scale, shift)) => (&x1 * &scale + &shift, &self.xyz * &scale + &shift),
             None => (x1, self.xyz.shallow_clone()),
+        };
+        let (x0, x1) = if self.flow.centered {
+            (
+                center_by_mass(&x0, &self.weights),
+                center_by_mass(&x1, &self.weights),
+            )
+        } else {
+            (x0, x1)
         };
         let xt = &x0 * (1.0 - &tb) + &x1 * &tb;
         let delta = &x1 - &x0;

@@ -39,12 +39,14 @@ fn written_datasets_record_the_space_and_project_onto_it() {
         7,
         3..7,
         m.normalization,
+        m.frame,
         "coarse",
         "test",
         false,
     )
     .unwrap();
     let opened = Dataset::open(data.dir()).unwrap();
+    assert_eq!(opened.manifest().frame, Some(m.frame));
     let manifest = DeformManifest::of(&opened).unwrap().unwrap();
     assert_eq!(manifest.space, space);
     assert_eq!((manifest.first, manifest.mesh_role.as_str()), (3, "coarse"));

@@ -93,16 +93,42 @@ fn a_trained_run_samples_on_a_refined_mesh() {
         .map(|(a, b)| (a - b).abs())
         .fold(0.0f32, f32::max);
     assert!(diff < 1e-4, "{diff}");
-    // starting noise: the run's kind on the *target* mesh
+    // starting noise: the run's kind on the *target* mesh in the training
+    // frame, `center(sigma * solve(L + tau M, sqrt(m) n))` (the solve is
+    // linear, so sigma before or after it is the same), the centring
+    // recomputed here in f64 with the target's own lumped mass
+    let flow = sampler.flow();
+    assert!(flow.centered && !flow.frame.is_identity());
+    assert_eq!(
+        flow.frame,
+        mfm_geometry::frame::CanonicalFrame::of(&procedural::icosphere(1)).unwrap()
+    );
     let target = sampler.prepare(&fine).unwrap();
     let x0 = sampler.noise(&target, 2, 3, 9).unwrap();
-    let direct = NoiseSampler::new(&fine, sampler.flow().noise)
+    let framed = flow.frame.apply(&fine);
+    let direct = NoiseSampler::new(&framed, flow.noise)
         .unwrap()
         .sample_range_f32(2, 3, 3, 9)
         .unwrap();
-    let scale = sampler.flow().noise_scale as f32;
-    let expected: Vec<f32> = direct.data().iter().map(|x| x * scale).collect();
-    assert_eq!(Vec::<f32>::try_from(x0.flatten(0, -1)).unwrap(), expected);
+    let mass = mfm_geometry::operators::lumped_mass(&framed);
+    let area: f64 = mass.iter().sum();
+    let v = fine.num_vertices();
+    let got = values(&x0);
+    for i in 0..3 {
+        for c in 0..3 {
+            let at = |vi: usize| i * v * 3 + vi * 3 + c;
+            let raw: Vec<f64> = (0..v)
+                .map(|vi| flow.noise_scale * f64::from(direct.data()[at(vi)]))
+                .collect();
+            let mean = raw.iter().zip(&mass).map(|(x, m)| x * m).sum::<f64>() / area;
+            for vi in 0..v {
+                let d = (got[at(vi)] - (raw[vi] - mean)).abs();
+                assert!(d < 1e-5, "sample {i} channel {c} vertex {vi}: {d}");
+            }
+            let got_mean = (0..v).map(|vi| got[at(vi)] * mass[vi]).sum::<f64>() / area;
+            assert!(got_mean.abs() < 1e-6, "{got_mean}");
+        }
+    }
 
     // without the final model, the newest checkpoint is used: same samples
     std::fs::remove_file(run.path().join(WEIGHTS_FILE)).unwrap();
@@ -176,6 +202,10 @@ fn flow(noise: NoiseKind, offset: f64) -> FlowSpec {
         noise_scale: 3.0,
         condition_on_xyz: false,
         velocity_offset: vec![offset],
+        frame: mfm_geometry::frame::CanonicalFrame::identity(),
+        positions: false,
+        centered: false,
+        training_surface: None,
     }
 }
 
@@ -323,4 +353,94 @@ fn samples_do_not_depend_on_the_thread_count() {
     tch::set_num_threads(1);
     assert!(by_threads[0].iter().all(|x| x.is_finite()));
     assert_eq!(by_threads[0], by_threads[1]);
+}
+
+/// A dataset of shapes in odd units (a sphere 40 across, far from the
+/// origin), trained on in the canonical frame and sampled on a finer
+/// triangulation in the same units: the samples come back in the user's
+/// units, the frame is the training mesh's, and a mesh of another size is
+/// flagged.
+#[test]
+fn position_samples_come_back_in_the_datasets_units() {
+    use mfm_geometry::frame::CanonicalFrame;
+    let (scale, shift) = (20.0, [100.0, -20.0, 5.0]);
+    let mesh = procedural::icosphere(1).transformed(scale, shift);
+    let v = mesh.num_vertices();
+    // shapes: the sphere stretched along x by 1 + i/10, about its centre
+    let mut data = Vec::new();
+    for i in 0..4 {
+        for p in mesh.positions() {
+            let x = shift[0] + (p[0] - shift[0]) * (1.0 + 0.1 * i as f64);
+            data.extend([x as f32, p[1] as f32, p[2] as f32]);
+        }
+    }
+    let signals = Arc::new(InMemorySignals::new(data, 4, v, 3).unwrap());
+    let run = tempfile::tempdir().unwrap();
+    let mut c = RunConfig::preset("cpu").unwrap();
+    c.model.width = Some(8);
+    c.model.blocks = Some(1);
+    c.model.condition_on_xyz = true;
+    c.train.steps = 3;
+    c.train.batch = 2;
+    c.train.threads = 1;
+    c.train.device = DeviceChoice::Cpu;
+    let trainer = Trainer::new(run.path(), c, &mesh, signals).unwrap();
+    let flow = trainer.flow().clone();
+    assert_eq!(flow.frame, CanonicalFrame::of(&mesh).unwrap());
+    assert!((flow.frame.scale - 1.0 / (2.0 * scale)).abs() < 1e-9);
+    assert!(flow.positions && flow.centered);
+    // the offset is the data's mean in the frame: near the origin
+    assert!(
+        flow.velocity_offset.iter().all(|o| o.abs() < 0.05),
+        "{flow:?}"
+    );
+    let mut trainer = trainer;
+    trainer.run(&AtomicBool::new(false), false).unwrap();
+
+    let sampler = Sampler::load(run.path(), Some(Device::Cpu)).unwrap();
+    assert_eq!(sampler.flow(), &flow);
+    // midpoint subdivision: the same surface, 4x the faces
+    let fine = mfm_geometry::subdivide::midpoint(&mesh).unwrap();
+    assert!(sampler.surface_warnings(&fine).is_empty());
+    let opts = SampleOptions {
+        steps: 2,
+        method: OdeMethod::Midpoint,
+        batch: 2,
+    };
+    let s = sampler.sample(&fine, 2, 3, &opts).unwrap();
+    // the flow carries no mean, so each sample's mass-weighted centroid is
+    // the data's mean centroid, mapped back to the dataset's units
+    let mass = mfm_geometry::operators::lumped_mass(&fine);
+    let area: f64 = mass.iter().sum();
+    let want = flow.frame.from_canonical([
+        flow.velocity_offset[0],
+        flow.velocity_offset[1],
+        flow.velocity_offset[2],
+    ]);
+    for i in 0..2 {
+        let x = s.sample(i);
+        for k in 0..3 {
+            let c: f64 = (0..fine.num_vertices())
+                .map(|vi| mass[vi] * f64::from(x[3 * vi + k]))
+                .sum::<f64>()
+                / area;
+            assert!(
+                (c - want[k]).abs() < 1e-3 * scale,
+                "sample {i} axis {k}: {c} vs {want:?}"
+            );
+            assert!(
+                (c - shift[k]).abs() < 0.05 * scale,
+                "sample {i} axis {k}: {c}"
+            );
+        }
+    }
+    // a mesh in other units is flagged, naming both sizes
+    let w = sampler.surface_warnings(&fine.transformed(0.05, [0.0; 3]));
+    assert_eq!(w.len(), 2, "{w:?}");
+    assert!(
+        w[0].starts_with("largest bounding-box extent 2 ")
+            && w[0].contains("training surface's 40 by 95%"),
+        "{w:?}"
+    );
+    assert!(w[1].contains("area"), "{w:?}");
 }

@@ -474,8 +474,16 @@ fn run_folder_records_config_and_resolved_flow() {
     let flow = checkpoint::FlowSpec::read(run.path().join(checkpoint::FLOW_FILE)).unwrap();
     assert_eq!(&flow, t.flow());
 
-    // "unit": fresh noise times the scale has RMS ~1 over the surface
-    let sampler = mfm_noise::NoiseSampler::new(&mesh, cfg.noise.kind).unwrap();
+    // the run trains in the training mesh's canonical frame
+    assert_eq!(
+        flow.frame,
+        mfm_geometry::frame::CanonicalFrame::of(&mesh).unwrap()
+    );
+    assert!(flow.centered && !flow.positions);
+    // "unit": fresh noise (on the mesh in the frame) times the scale has RMS
+    // ~1 over the surface
+    let framed = flow.frame.apply(&mesh);
+    let sampler = mfm_noise::NoiseSampler::new(&framed, cfg.noise.kind).unwrap();
     let batch = sampler.sample(64, 1, 12345).unwrap();
     let area: f64 = sampler.mass().iter().sum();
     let ms: f64 = (0..64)

@@ -29,6 +29,7 @@
 
 pub mod decimate;
 pub mod flips;
+pub mod frame;
 pub mod holes;
 pub mod io;
 pub mod mesh;

@@ -77,6 +77,12 @@ pub enum MeshError {
     /// More vertices than `u32` indices can address.
     #[error("the mesh has {0} vertices; at most 2^32 - 1 are supported")]
     TooManyVertices(usize),
+    /// All vertices coincide: the mesh has no size.
+    #[error("the mesh has zero size: its bounding box's largest extent is {extent}")]
+    ZeroSize {
+        /// The largest bounding-box extent found.
+        extent: f64,
+    },
 }
 
 impl TriMesh {
