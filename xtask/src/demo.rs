@@ -3,10 +3,13 @@
 //! Builds the `mfm` binary and runs the paper's GMM experiment at demo
 //! scale on the built-in blob: a dataset of Gaussian-bump signals on a
 //! uniform triangulation and a reference set on a non-uniform one (half of
-//! the surface refined twice), brief training with Matérn noise, sampling on
-//! the non-uniform mesh, the metrics, and pictures; plus Matérn vs naive
-//! noise and the noise spectrum on the two triangulations. Writes a
-//! Markdown report linking everything.
+//! the surface refined twice), training with Matérn noise in the canonical
+//! frame (the official recipe, 3000 steps of the `cpu` network: about four
+//! minutes on two cores), sampling on the non-uniform mesh, the sample
+//! quality (bump fit against the data's floor, training signals beside
+//! samples on one colour scale) next to the distribution metrics, and
+//! pictures; plus Matérn vs naive noise and the noise spectrum on the two
+//! triangulations. Writes a Markdown report linking everything.
 
 use crate::pyenv::PyEnv;
 use anyhow::{Context, Result};
@@ -383,6 +386,18 @@ fn quality_section(metrics: &serde_json::Value) -> Result<String> {
         GOAL.2,
         mark(bumps >= GOAL.2)
     )?;
+    if !(peak >= GOAL.0 && res <= GOAL.1 && bumps >= GOAL.2) {
+        writeln!(
+            md,
+            "Where the rest is: the controlled runs in docs/BENCHMARKS.md (\"What limits sample \
+quality\") change one thing at a time on this data. The canonical frame is what turned noise \
+into bump-sized blotches (residual 0.89 -> 0.73); 10x the steps, a 4x batch, a 6.5x larger \
+network, noise sigma 1 or 3, centring and xyz conditioning each move the residual by at most \
+0.04. The samples follow the noise's large-scale layout as smooth fields with peaks of \
+0.6-0.7 instead of three separated unit bumps: at this size the model, not the recipe or \
+the step count, is the limit.\n"
+        )?;
+    }
     writeln!(
         md,
         "First generated samples:\n\n| sample | residual | peak | bumps above half height |\n|---|---|---|---|"

@@ -129,9 +129,10 @@ pub struct TrainArgs {
     /// are an error). Without it, --preset gives the configuration.
     #[arg(long, conflicts_with = "preset")]
     config: Option<PathBuf>,
-    /// Named configuration: `cpu` (minutes on a laptop), `cpu-deform` (`cpu`
-    /// conditioned on the source xyz, with scale/shift augmentation, for
-    /// `mfm dataset deform` data) or `paper` (the paper's recipe, for a GPU).
+    /// Named configuration: `cpu` (scalar signals, minutes on a laptop),
+    /// `cpu-deform` (`cpu` conditioned on the source xyz, for `mfm dataset
+    /// deform` data), `paper` (the authors' human-pose recipe, for a GPU) or
+    /// `paper-elastic` (their elastic-deformation recipe).
     #[arg(long)]
     preset: Option<String>,
     /// Dataset folder (overrides the configuration's dataset.path).
@@ -487,7 +488,9 @@ pub fn train(a: TrainArgs) -> Result<()> {
         let mut config = match (&a.config, &a.preset) {
             (Some(path), _) => RunConfig::from_toml_file(path)?,
             (None, Some(name)) => RunConfig::preset(name)?,
-            (None, None) => bail!("give --config run.toml or --preset cpu|cpu-deform|paper"),
+            (None, None) => {
+                bail!("give --config run.toml or --preset cpu|cpu-deform|paper|paper-elastic")
+            }
         };
         if let Some(d) = &a.dataset {
             config.dataset.path = Some(d.clone());
