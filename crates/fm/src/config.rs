@@ -182,7 +182,8 @@ pub struct ModelConfig {
     /// between centred noise and centred targets and the mean is added once,
     /// after the last ODE step; without it the mean is added to the
     /// network's vertex velocity at every step (integrating to the same
-    /// constant). Ignored (zero) for the linear head.
+    /// constant). For the linear head, whose output can carry a mean, only
+    /// with centring.
     pub mean_offset: bool,
 }
 

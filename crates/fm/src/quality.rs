@@ -374,7 +374,8 @@ pub struct GmmQualityReport {
     /// Fraction of generated samples with residual at most
     /// `max(2 * floor, DATA_LIKE_MIN)`.
     pub within_twice_floor: f64,
-    /// [`diversity`] of the generated set against the reference set.
+    /// [`diversity`] of the generated set against the reference set (NaN,
+    /// `null` in JSON, when either set has a single signal).
     pub diversity: f64,
 }
 
@@ -393,9 +394,15 @@ impl GmmQualityReport {
         let g = GmmQuality::of(generator, mesh, mass, generated)?;
         let r = GmmQuality::of(generator, mesh, mass, reference)?;
         let floor = r.residual.median;
+        // one sample (or one reference signal) has no pairs: no diversity
+        let diversity = if generated.len() < 2 || reference.len() < 2 {
+            f64::NAN
+        } else {
+            diversity(mass, generated, reference)?
+        };
         Ok(Self {
             within_twice_floor: g.fraction_within_twice(floor),
-            diversity: diversity(mass, generated, reference)?,
+            diversity,
             floor,
             generated: g,
             reference: r,

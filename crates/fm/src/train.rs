@@ -543,7 +543,10 @@ fn resolve_flow(
                 / positive("noise's RMS", noise_rms(noise, config.train.seed)?)?
         }
     };
-    let offset_on = config.model.mean_offset && config.model.head == HeadKind::Njf;
+    // the NJF head's output has zero mean, so the mean must come from the
+    // offset; a linear head learns it unless the targets are centred
+    let offset_on =
+        config.model.mean_offset && (config.model.head == HeadKind::Njf || config.train.center);
     Ok(FlowSpec {
         channels: c,
         noise: config.noise.kind,

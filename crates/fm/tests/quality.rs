@@ -122,6 +122,11 @@ fn flat_noise_and_single_mode_sets_are_far_from_the_floor() {
     assert!(r.generated.residual.median < 0.1);
     assert!(r.diversity < 1e-6, "{}", r.diversity);
     assert!(diversity(&s.mass, &s.reference, &s.reference).unwrap() == 1.0);
+    // a single sample is scored, without a diversity
+    let single = InMemorySignals::new(one.clone(), 1, v, 1).unwrap();
+    let r = report(&s, &single);
+    assert!(r.generated.residual.median < 0.1 && r.diversity.is_nan());
+    assert!(diversity(&s.mass, &single, &s.reference).is_err());
 }
 
 #[test]
