@@ -597,8 +597,8 @@ pub struct TrainConfig {
     /// signals (deformations).
     pub augment: Augment,
     /// Centre every noise sample and every training target by its
-    /// mass-weighted mean, per channel (default `true`, the official
-    /// recipe): the flow then carries no constant part, which the NJF head
+    /// mass-weighted mean, per channel and connected component (as the NJF
+    /// head centres its output; default `true`, the official recipe): the flow then carries no constant part, which the NJF head
     /// cannot produce anyway, and the dataset's mean is added back after
     /// sampling ([`ModelConfig::mean_offset`]). `false` keeps the raw noise
     /// and targets and adds the mean as a constant velocity instead.

@@ -169,15 +169,9 @@ pub fn fit_bumps(
             let b = generator.bump(c)?;
             let mut set: Vec<&[f64]> = basis.iter().map(Vec::as_slice).collect();
             set.push(&b);
-            let n = set.len();
-            let gram: Vec<Vec<f64>> = (0..n)
-                .map(|i| (0..n).map(|j| dot(set[i], set[j])).collect())
-                .collect();
-            let rhs: Vec<f64> = set.iter().map(|bi| dot(bi, signal)).collect();
-            let Some(h) = solve_small(gram, rhs.clone()) else {
+            let Some((err, h)) = joint_fit(&set, signal, norm2, &dot) else {
                 continue;
             };
-            let err = norm2 - h.iter().zip(&rhs).map(|(a, b)| a * b).sum::<f64>();
             if round.as_ref().is_none_or(|r| err < r.0) {
                 round = Some((err, c, b, h));
             }
@@ -189,10 +183,7 @@ pub fn fit_bumps(
         basis.push(b);
         heights = h;
         best_err = err;
-        residual = signal.to_vec();
-        for (bk, hk) in basis.iter().zip(&heights) {
-            residual.iter_mut().zip(bk).for_each(|(r, x)| *r -= hk * x);
-        }
+        residual = residual_of(signal, &basis, &heights);
     }
     // local refinement: greedy choices go wrong where bumps overlap (the top
     // of a sum of two bumps is between their centres), so each centre in turn
@@ -218,15 +209,9 @@ pub fn fit_bumps(
                         }
                     })
                     .collect();
-                let n = set.len();
-                let gram: Vec<Vec<f64>> = (0..n)
-                    .map(|i| (0..n).map(|j| dot(set[i], set[j])).collect())
-                    .collect();
-                let rhs: Vec<f64> = set.iter().map(|bi| dot(bi, signal)).collect();
-                let Some(h) = solve_small(gram, rhs.clone()) else {
+                let Some((err, h)) = joint_fit(&set, signal, norm2, &dot) else {
                     continue;
                 };
-                let err = norm2 - h.iter().zip(&rhs).map(|(a, b)| a * b).sum::<f64>();
                 let bar = best.as_ref().map_or(best_err, |b| b.0);
                 if err < bar - 1e-12 * norm2 {
                     best = Some((err, c, b, h));
@@ -244,10 +229,7 @@ pub fn fit_bumps(
             break;
         }
     }
-    residual = signal.to_vec();
-    for (bk, hk) in basis.iter().zip(&heights) {
-        residual.iter_mut().zip(bk).for_each(|(r, x)| *r -= hk * x);
-    }
+    let residual = residual_of(signal, &basis, &heights);
     // the direct residual norm (the Gram identity loses digits near 0)
     let direct = dot(&residual, &residual);
     let err = if direct.is_finite() { direct } else { best_err };
@@ -263,6 +245,35 @@ pub fn fit_bumps(
         centers,
         heights,
     })
+}
+
+/// The least-squares fit of `signal` by the bumps `set` (heights free,
+/// `dot` the mass inner product, `norm2 = dot(signal, signal)`): the squared
+/// residual norm and the heights; `None` when the bumps are (numerically)
+/// dependent.
+fn joint_fit(
+    set: &[&[f64]],
+    signal: &[f64],
+    norm2: f64,
+    dot: &dyn Fn(&[f64], &[f64]) -> f64,
+) -> Option<(f64, Vec<f64>)> {
+    let n = set.len();
+    let gram: Vec<Vec<f64>> = (0..n)
+        .map(|i| (0..n).map(|j| dot(set[i], set[j])).collect())
+        .collect();
+    let rhs: Vec<f64> = set.iter().map(|b| dot(b, signal)).collect();
+    let h = solve_small(gram, rhs.clone())?;
+    let err = norm2 - h.iter().zip(&rhs).map(|(a, b)| a * b).sum::<f64>();
+    Some((err, h))
+}
+
+/// `signal - sum_k heights[k] basis[k]`.
+fn residual_of(signal: &[f64], basis: &[Vec<f64>], heights: &[f64]) -> Vec<f64> {
+    let mut r = signal.to_vec();
+    for (b, h) in basis.iter().zip(heights) {
+        r.iter_mut().zip(b).for_each(|(r, x)| *r -= h * x);
+    }
+    r
 }
 
 fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {

@@ -47,7 +47,6 @@ use tch::{Device, Kind, Tensor};
 use crate::checkpoint::{self, FLOW_FILE, FlowSpec, WEIGHTS_FILE};
 use crate::config::{DeviceChoice, OdeMethod, SampleConfig};
 use crate::error::{FmError, Result};
-use crate::train::{center_by_mass, mass_weights};
 
 /// Relative size difference above which [`Sampler::surface_warnings`]
 /// speaks up.
@@ -122,8 +121,6 @@ pub struct TargetMesh {
     mesh: MeshTensors,
     noise: NoiseSampler,
     xyz: Tensor,
-    /// Normalized lumped mass `[1, V, 1]` (centring).
-    weights: Tensor,
 }
 
 impl TargetMesh {
@@ -306,7 +303,6 @@ impl Sampler {
         let noise = NoiseSampler::new(&framed, self.flow.noise)?;
         Ok(TargetMesh {
             mesh: MeshTensors::new(&framed)?,
-            weights: mass_weights(noise.mass(), self.net.device()),
             noise,
             xyz: positions_tensor(&framed, self.net.device()),
         })
@@ -427,11 +423,11 @@ impl Sampler {
         let x = Tensor::from_slice(&values)
             .reshape([count as i64, v, c as i64])
             .to_device(self.net.device());
-        Ok(if self.flow.centered {
-            center_by_mass(&x, &target.weights)
+        if self.flow.centered {
+            Ok(target.mesh.remove_mass_mean(&x)?)
         } else {
-            x
-        })
+            Ok(x)
+        }
     }
 
     /// The velocity `v(x, t)` at time `t` for a batch `x: [B, V, C]` (no

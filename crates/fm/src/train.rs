@@ -12,7 +12,7 @@
 //!    `sigma`: by linearity `solve(L + tau M, sigma sqrt(m) n)`),
 //!    `t ~ U[0, 1)` per batch item;
 //! 2. with `train.center` (the default), `f_0` and `f_1` each minus its
-//!    mass-weighted mean per channel;
+//!    mass-weighted mean per channel and connected component;
 //! 3. `f_t = (1 - t) f_0 + t f_1`, target `delta = f_1 - f_0`;
 //! 4. `(v, J) = net(f_t | t [, source xyz])`, `v` plus the run's constant
 //!    velocity offset when not centring;
@@ -414,8 +414,6 @@ pub struct Trainer {
     xyz: Tensor,
     /// The velocity offset added in training (uncentred runs only).
     offset: Option<Tensor>,
-    /// Normalized lumped mass `[1, V, 1]`, for centring.
-    weights: Tensor,
     signals: Arc<dyn SignalSource>,
     noise: NoiseSampler,
     net: PoissonNet,
@@ -590,35 +588,21 @@ impl TrainingFrame {
     }
 }
 
-/// The training mesh and signals in the flow's frame.
+/// The training mesh and signals in `frame` (signals move only when they
+/// are `positions`).
 fn in_frame(
-    flow: &FlowSpec,
+    frame: CanonicalFrame,
+    positions: bool,
     mesh: &TriMesh,
     signals: Arc<dyn SignalSource>,
 ) -> Result<(TriMesh, Arc<dyn SignalSource>)> {
-    let framed = flow.frame.apply(mesh);
-    if flow.positions && !flow.frame.is_identity() {
-        let s: Arc<dyn SignalSource> = Arc::new(FramedPositions::new(signals, flow.frame)?);
+    let framed = frame.apply(mesh);
+    if positions && !frame.is_identity() {
+        let s: Arc<dyn SignalSource> = Arc::new(FramedPositions::new(signals, frame)?);
         Ok((framed, s))
     } else {
         Ok((framed, signals))
     }
-}
-
-/// Removes each item's per-channel mean, weighted by `weights` (`[1, V, 1]`,
-/// summing to 1), from `x: [B, V, C]`.
-pub(crate) fn center_by_mass(x: &Tensor, weights: &Tensor) -> Tensor {
-    let mean = (x * weights).sum_dim_intlist([1i64].as_slice(), true, x.kind());
-    x - mean
-}
-
-/// The lumped mass of `mesh` divided by its total, as `[1, V, 1]` `f32`.
-pub(crate) fn mass_weights(mass: &[f64], device: Device) -> Tensor {
-    let total: f64 = mass.iter().sum();
-    let w: Vec<f32> = mass.iter().map(|m| (m / total) as f32).collect();
-    Tensor::from_slice(&w)
-        .reshape([1, mass.len() as i64, 1])
-        .to_device(device)
 }
 
 /// Rewrites the log keeping the header and the rows with `step <= keep`
@@ -695,18 +679,7 @@ impl Trainer {
         mesh: &TriMesh,
         signals: Arc<dyn SignalSource>,
     ) -> Result<Self> {
-        let provisional = FlowSpec {
-            channels: signals.channels(),
-            noise: config.noise.kind,
-            noise_scale: 1.0,
-            condition_on_xyz: config.model.condition_on_xyz,
-            velocity_offset: vec![0.0; signals.channels()],
-            frame: frame.frame,
-            positions: frame.positions,
-            centered: config.train.center,
-            training_surface: Some(frame.size),
-        };
-        let (framed_mesh, framed_signals) = in_frame(&provisional, mesh, signals)?;
+        let (framed_mesh, framed_signals) = in_frame(frame.frame, frame.positions, mesh, signals)?;
         let noise = NoiseSampler::new(&framed_mesh, config.noise.kind)?;
         let flow = resolve_flow(&config, &noise, framed_signals.as_ref(), frame)?;
         flow.write(run_dir.join(FLOW_FILE))?;
@@ -799,7 +772,7 @@ impl Trainer {
                 found: signals.channels(),
             });
         }
-        let (framed_mesh, framed_signals) = in_frame(&flow, mesh, signals)?;
+        let (framed_mesh, framed_signals) = in_frame(flow.frame, flow.positions, mesh, signals)?;
         let noise = NoiseSampler::new(&framed_mesh, config.noise.kind)?;
         let mut t = Self::build(run_dir, config, flow, &framed_mesh, framed_signals, noise)?;
         t.net.load_weights(info.dir.join(WEIGHTS_FILE))?;
@@ -870,7 +843,6 @@ impl Trainer {
             } else {
                 offset_tensor(&flow, device)
             },
-            weights: mass_weights(noise.mass(), device),
             run_dir,
             flow,
             device,
@@ -1009,8 +981,8 @@ impl Trainer {
         };
         let (x0, x1) = if self.flow.centered {
             (
-                center_by_mass(&x0, &self.weights),
-                center_by_mass(&x1, &self.weights),
+                self.mesh.remove_mass_mean(&x0)?,
+                self.mesh.remove_mass_mean(&x1)?,
             )
         } else {
             (x0, x1)
