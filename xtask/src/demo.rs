@@ -332,22 +332,14 @@ const GOAL: (f64, f64, f64) = (0.8, 0.35, 2.5);
 /// The quality table of the report: quartiles of the generated set against
 /// the reference set, the first samples' numbers, and the goal.
 fn quality_section(metrics: &serde_json::Value) -> Result<String> {
-    use crate::flow_steps::num;
+    use crate::flow_steps::{Quality, num};
     let q = &metrics["quality"];
     anyhow::ensure!(
         q.is_object(),
         "metrics.json has no quality section (mfm eval on a GMM reference set writes one)"
     );
-    let (g, r) = (&q["generated"], &q["reference"]);
-    let quart = |set: &serde_json::Value, k: &str| {
-        let v = &set[k];
-        format!(
-            "{:.3} [{:.3}, {:.3}]",
-            num(v, "median"),
-            num(v, "q1"),
-            num(v, "q3")
-        )
-    };
+    let (g, r) = (Quality::of(metrics), Quality::reference_of(metrics));
+    let quart = |v: [f64; 3]| format!("{:.3} [{:.3}, {:.3}]", v[1], v[0], v[2]);
     let mut md = String::new();
     writeln!(
         md,
@@ -356,24 +348,20 @@ fn quality_section(metrics: &serde_json::Value) -> Result<String> {
     writeln!(
         md,
         "| generated | {} | {} | {:.2} | {:.0}% | {:.2} |",
-        quart(g, "residual"),
-        quart(g, "peak"),
-        num(g, "bumps_above_half"),
-        100.0 * num(q, "within_twice_floor"),
-        num(q, "diversity")
+        quart(g.residual),
+        quart(g.peak),
+        g.bumps,
+        100.0 * g.within,
+        g.diversity
     )?;
     writeln!(
         md,
         "| reference (the floor) | {} | {} | {:.2} | | 1 |\n",
-        quart(r, "residual"),
-        quart(r, "peak"),
-        num(r, "bumps_above_half")
+        quart(r.residual),
+        quart(r.peak),
+        r.bumps
     )?;
-    let (peak, res, bumps) = (
-        num(&g["peak"], "median"),
-        num(&g["residual"], "median"),
-        num(g, "bumps_above_half"),
-    );
+    let (peak, res, bumps) = (g.peak[1], g.residual[1], g.bumps);
     let mark = |ok: bool| if ok { "reached" } else { "not reached" };
     writeln!(
         md,
@@ -402,7 +390,7 @@ the step count, is the limit.\n"
         md,
         "First generated samples:\n\n| sample | residual | peak | bumps above half height |\n|---|---|---|---|"
     )?;
-    if let Some(fits) = g["fits"].as_array() {
+    if let Some(fits) = q["generated"]["fits"].as_array() {
         for (i, f) in fits.iter().take(8).enumerate() {
             writeln!(
                 md,

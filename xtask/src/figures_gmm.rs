@@ -15,7 +15,7 @@
 //! `table.json`, and per kind the run folder, the samples and
 //! `means_KIND.png` (point-wise mean, generated vs reference).
 
-use crate::flow_steps::{Comparison, Mfm, arg, fresh_dir, mesh_or_shared, num, out_dir};
+use crate::flow_steps::{Comparison, Mfm, Quality, arg, fresh_dir, mesh_or_shared, num, out_dir};
 use crate::pyenv::PyEnv;
 use anyhow::Result;
 use serde_json::Value;
@@ -128,7 +128,7 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
             q.residual[1],
             q.residual[0],
             q.residual[2],
-            q.peak,
+            q.peak[1],
             q.bumps,
             100.0 * q.within,
             q.diversity
@@ -136,14 +136,14 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
         writeln!(
             csv,
             "{kind},{},{},{},{},{},{},{},{err},{mmd},{cov},{nna},{tr:.1},{sa:.2}",
-            q.residual[1], q.residual[0], q.residual[2], q.peak, q.bumps, q.within, q.diversity
+            q.residual[1], q.residual[0], q.residual[2], q.peak[1], q.bumps, q.within, q.diversity
         )?;
     }
     if let Some(d) = floor {
         writeln!(
             md,
             "| reference set (the floor) | {:.3} [{:.3}, {:.3}] | {:.2} | {:.2} | | 1 | | | | | | |",
-            d.residual[1], d.residual[0], d.residual[2], d.peak, d.bumps
+            d.residual[1], d.residual[0], d.residual[2], d.peak[1], d.bumps
         )?;
     }
     writeln!(
@@ -172,42 +172,4 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
     print!("{md}");
     println!("reproduce-figures gmm: wrote {}", out.display());
     Ok(())
-}
-
-/// The bump-fit columns of one `mfm eval` report (`quality`).
-struct Quality {
-    /// q1, median, q3 of the residual.
-    residual: [f64; 3],
-    peak: f64,
-    bumps: f64,
-    within: f64,
-    diversity: f64,
-}
-
-impl Quality {
-    fn set(q: &Value, within: f64, diversity: f64) -> Self {
-        let r = &q["residual"];
-        Self {
-            residual: [num(r, "q1"), num(r, "median"), num(r, "q3")],
-            peak: num(&q["peak"], "median"),
-            bumps: num(q, "bumps_above_half"),
-            within,
-            diversity,
-        }
-    }
-
-    /// The generated set's numbers.
-    fn of(metrics: &Value) -> Self {
-        let q = &metrics["quality"];
-        Self::set(
-            &q["generated"],
-            num(q, "within_twice_floor"),
-            num(q, "diversity"),
-        )
-    }
-
-    /// The reference set's numbers.
-    fn reference_of(metrics: &Value) -> Self {
-        Self::set(&metrics["quality"]["reference"], f64::NAN, 1.0)
-    }
 }

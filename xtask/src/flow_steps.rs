@@ -103,6 +103,48 @@ impl KindResult {
     }
 }
 
+/// The bump-fit numbers of one set in an `mfm eval` report (`quality`).
+pub struct Quality {
+    /// q1, median, q3 of the residual.
+    pub residual: [f64; 3],
+    /// q1, median, q3 of the peak value.
+    pub peak: [f64; 3],
+    /// Mean bumps above half height per sample.
+    pub bumps: f64,
+    /// Fraction of data-like samples (NaN for the reference set).
+    pub within: f64,
+    /// Diversity against the reference set (1 for the reference set).
+    pub diversity: f64,
+}
+
+impl Quality {
+    fn set(q: &Value, within: f64, diversity: f64) -> Self {
+        let quartiles = |v: &Value| [num(v, "q1"), num(v, "median"), num(v, "q3")];
+        Self {
+            residual: quartiles(&q["residual"]),
+            peak: quartiles(&q["peak"]),
+            bumps: num(q, "bumps_above_half"),
+            within,
+            diversity,
+        }
+    }
+
+    /// The generated set's numbers.
+    pub fn of(metrics: &Value) -> Self {
+        let q = &metrics["quality"];
+        Self::set(
+            &q["generated"],
+            num(q, "within_twice_floor"),
+            num(q, "diversity"),
+        )
+    }
+
+    /// The reference set's numbers.
+    pub fn reference_of(metrics: &Value) -> Self {
+        Self::set(&metrics["quality"]["reference"], f64::NAN, 1.0)
+    }
+}
+
 /// Reads a JSON file.
 pub fn read_json(path: &Path) -> Result<Value> {
     let text =
