@@ -782,10 +782,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
             ColorRange::Auto,
             png,
         )?;
-        let diff_png = png.with_file_name(format!(
-            "{}_difference.png",
-            png.file_stem().and_then(|s| s.to_str()).unwrap_or("means")
-        ));
+        let diff_png = sibling_png(png, "difference");
         let mut opts = RenderOptions::with_size(400, 400);
         opts.colormap = Colormap::CoolWarm;
         opts.range = ColorRange::Symmetric;
@@ -890,7 +887,7 @@ fn save_projection_grid(
 fn sibling_png(png: &Path, suffix: &str) -> PathBuf {
     png.with_file_name(format!(
         "{}_{suffix}.png",
-        png.file_stem().and_then(|s| s.to_str()).unwrap_or("eval")
+        png.file_stem().and_then(|s| s.to_str()).unwrap_or("means")
     ))
 }
 

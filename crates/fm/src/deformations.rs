@@ -314,13 +314,7 @@ pub fn plausibility(
     }
     let projections = kept.into_iter().flatten().collect();
     let mean = mse.iter().sum::<f64>() / mse.len().max(1) as f64;
-    let mut sorted = mse.clone();
-    sorted.sort_by(f64::total_cmp);
-    let median = match sorted.len() {
-        0 => f64::NAN,
-        n if n % 2 == 1 => sorted[n / 2],
-        n => 0.5 * (sorted[n / 2 - 1] + sorted[n / 2]),
-    };
+    let median = crate::quality::Quartiles::of(&mse).median;
     Ok(Plausibility {
         mse,
         mean,
