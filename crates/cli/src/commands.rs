@@ -1,7 +1,7 @@
 //! The subcommands.
 
-use crate::mesh_arg::load_mesh;
-use crate::output::{write_json, write_matrix_market, write_npy};
+use crate::mesh_arg::{load_mesh, load_mesh_checked, mesh_path};
+use crate::output::{prepare_outputs, write_json, write_matrix_market, write_npy};
 use anyhow::{Context, Result, bail};
 use clap::{Subcommand, ValueEnum};
 use mfm_geometry::{MeshReport, TriMesh, io, operators, render};
@@ -225,12 +225,21 @@ struct OperatorSummary {
     conventions: &'static str,
 }
 
+/// The files `mfm operators` writes into its folder.
+const OPERATOR_FILES: [&str; 5] = [
+    "L.mtx",
+    "G.mtx",
+    "mass.npy",
+    "face_areas.npy",
+    "summary.json",
+];
+
 fn write_operators(spec: &str, out: &std::path::Path) -> Result<()> {
-    let mesh = load_mesh(spec)?;
+    let outputs: Vec<PathBuf> = OPERATOR_FILES.iter().map(|f| out.join(f)).collect();
+    let mesh = load_mesh_checked(spec)?;
     let ops = operators::Operators::new(&mesh)
         .with_context(|| format!("{spec}: cannot build operators"))?;
-    std::fs::create_dir_all(out)
-        .with_context(|| format!("cannot create folder {}", out.display()))?;
+    let undo = prepare_outputs(&[mesh_path(spec)], &outputs)?;
     write_matrix_market(&out.join("L.mtx"), &ops.laplacian)?;
     write_matrix_market(&out.join("G.mtx"), &ops.gradient)?;
     write_npy(&out.join("mass.npy"), &ops.mass, &[ops.mass.len() as u64])?;
@@ -248,12 +257,13 @@ fn write_operators(spec: &str, out: &std::path::Path) -> Result<()> {
         gradient_nonzeros: ops.gradient.val().len(),
         total_area: ops.face_areas.iter().sum(),
         gamma,
-        files: vec!["L.mtx", "G.mtx", "mass.npy", "face_areas.npy"],
+        files: OPERATOR_FILES[..4].to_vec(),
         conventions: "L: cotangent Laplacian, positive semi-definite (libigl cotmatrix negated); \
 mass: lumped barycentric; G: 2F x V intrinsic gradient, rows 2f,2f+1 in a per-face orthonormal frame; \
 gamma = ||M^-1 L||_F",
     };
     write_json(&out.join("summary.json"), &summary)?;
+    undo.keep();
     println!(
         "wrote L.mtx ({} nnz), G.mtx ({} nnz), mass.npy, face_areas.npy, summary.json to {}; Gamma = {:.6e}",
         summary.laplacian_nonzeros,
@@ -266,7 +276,9 @@ gamma = ||M^-1 L||_F",
 
 fn convert(spec: &str, out: &std::path::Path) -> Result<()> {
     let mesh = load_mesh(spec)?;
+    let undo = prepare_outputs(&[mesh_path(spec)], &[out.to_path_buf()])?;
     write_mesh(&mesh, out)?;
+    undo.keep();
     println!(
         "wrote {} ({} vertices, {} faces)",
         out.display(),
@@ -298,6 +310,7 @@ fn render_png(
     if !(16..=8192).contains(&size) {
         bail!("--size {size}: expected 16..=8192 pixels");
     }
+    let undo = prepare_outputs(&[mesh_path(spec), scalars], &[out.to_path_buf()])?;
     let mesh = load_mesh(spec)?;
     let values: Option<Vec<f64>> = match (scalar, scalars) {
         (Some(q), _) => Some(match q {
@@ -317,33 +330,19 @@ fn render_png(
     };
     let img = render::render_mesh(&mesh, values.as_deref(), &opts)?;
     render::save_png(&img, out)?;
+    undo.keep();
     println!("wrote {}", out.display());
     Ok(())
 }
 
 fn read_vertex_scalars(path: &std::path::Path, n: usize) -> Result<Vec<f64>> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let npy = npyz::NpyFile::new(&bytes[..])
-        .with_context(|| format!("{}: not a .npy file", path.display()))?;
-    let count: u64 = npy.shape().iter().product();
-    if count != n as u64 {
+    let a = mfm_files::npy::read::<f64>(path)?;
+    if a.values.len() != n {
         bail!(
             "{}: expected {n} values (one per vertex), found shape {:?}",
             path.display(),
-            npy.shape()
+            a.shape
         );
     }
-    let values: Vec<f64> = match npy.dtype() {
-        npyz::DType::Plain(t) if t.type_char() == npyz::TypeChar::Float && t.size_field() == 4 => {
-            npy.into_vec::<f32>()
-                .with_context(|| format!("{}: cannot read values", path.display()))?
-                .into_iter()
-                .map(f64::from)
-                .collect()
-        }
-        _ => npy
-            .into_vec::<f64>()
-            .with_context(|| format!("{}: expected float64 or float32 values", path.display()))?,
-    };
-    Ok(values)
+    Ok(a.values)
 }

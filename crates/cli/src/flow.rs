@@ -1,8 +1,8 @@
 //! Flow matching from the command line: `mfm dataset gmm`, `mfm train`,
 //! `mfm sample`, `mfm eval`.
 
-use crate::mesh_arg::load_mesh;
-use crate::output::write_json;
+use crate::mesh_arg::{load_mesh_checked, mesh_path};
+use crate::output::{prepare_outputs, write_json};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use mfm_fm::checkpoint::CONFIG_FILE;
@@ -196,6 +196,11 @@ pub struct SampleArgs {
     /// How many samples to also write as PLY files.
     #[arg(long, default_value_t = 4)]
     ply: usize,
+    /// Write into a non-empty --out folder: replaces only what `mfm sample`
+    /// writes (samples.npy, mesh.ply, samples.png, timing.json,
+    /// sample_NNN.ply, stale ones of an earlier run included).
+    #[arg(long)]
+    force: bool,
 }
 
 /// Arguments of `mfm eval`.
@@ -239,9 +244,20 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
     }
     ensure_empty(&a.out)?;
     let t0 = std::time::Instant::now();
-    let input = load_mesh(&a.mesh)?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))?;
+    let input = load_mesh_checked(&a.mesh)?;
+    let undo = dataset_undo(
+        &a.out,
+        &[
+            "train",
+            "reference",
+            "holdout",
+            "original.ply",
+            "coarse.ply",
+            "eval.ply",
+            "space.json",
+            "preview.png",
+        ],
+    )?;
     let meshes = DeformMeshes::from_mesh(&input, a.coarse_faces)
         .with_context(|| format!("preparing the meshes of {}", a.mesh))?;
     let space = deformations::space_for(
@@ -335,6 +351,7 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
         ColorRange::Auto,
         &a.out.join("preview.png"),
     )?;
+    undo.keep();
     println!(
         "wrote {} ({} training shapes, {} held out) in {:.1} s",
         a.out.display(),
@@ -369,10 +386,14 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
             (m.train, m.test, "builtin:blob".to_owned())
         }
         (Some(spec), None) => {
-            let m = GmmMeshes::from_base(load_mesh(spec)?, Default::default())?;
+            let m = GmmMeshes::from_base(load_mesh_checked(spec)?, Default::default())?;
             (m.train, m.test, spec.clone())
         }
-        (Some(spec), Some(test)) => (load_mesh(spec)?, load_mesh(test)?, spec.clone()),
+        (Some(spec), Some(test)) => (
+            load_mesh_checked(spec)?,
+            load_mesh_checked(test)?,
+            spec.clone(),
+        ),
         (None, Some(_)) => bail!("--test-mesh needs --mesh (the training mesh)"),
     };
     println!(
@@ -397,6 +418,10 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
             .with_frame(frame);
         Ok(Dataset::write(dir, mesh, &signals, manifest)?)
     };
+    let undo = dataset_undo(
+        &a.out,
+        &["train", "reference", "test_mesh.ply", "preview.png"],
+    )?;
     let t0 = std::time::Instant::now();
     let train = write(&a.out.join("train"), &train_mesh, a.n, a.seed, "training")?;
     // A different seed stream for the reference set: its signals are not
@@ -428,6 +453,7 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
         ColorRange::Auto,
         &a.out.join("preview.png"),
     )?;
+    undo.keep();
     println!(
         "wrote {} ({} training signals, {} reference) in {:.1} s",
         a.out.display(),
@@ -459,15 +485,39 @@ pub fn train(a: TrainArgs) -> Result<()> {
             );
         }
     }
+    // A fresh run that fails before its first checkpoint leaves nothing.
+    let mut fresh: Option<mfm_files::Undo> = None;
     let mut trainer = if a.resume {
         if a.config.is_some() || a.preset.is_some() || a.noise.is_some() || a.seed.is_some() {
             bail!(
                 "--resume continues with the run's own {CONFIG_FILE}; drop --config/--preset/--noise/--seed"
             );
         }
+        if !a.out.is_dir() {
+            bail!(
+                "--out {}: no such run folder (--resume continues a run `mfm train --out` started)",
+                a.out.display()
+            );
+        }
         let stored = RunConfig::from_toml_file(a.out.join(CONFIG_FILE))
             .with_context(|| format!("{} is not a run folder", a.out.display()))?;
-        let dir = dataset_dir(a.dataset.as_deref(), &stored)?;
+        let dir = match (a.dataset.as_deref(), &stored.dataset.path) {
+            (None, Some(p)) if !p.is_dir() => {
+                let found = mfm_fm::config::locate_dataset(p, &a.out).with_context(|| {
+                    format!(
+                        "the run's dataset {} is gone (moved?); pass --dataset DIR",
+                        p.display()
+                    )
+                })?;
+                eprintln!(
+                    "note: the run's dataset {} is not there; using {} (found beside the run folder)",
+                    p.display(),
+                    found.display()
+                );
+                found
+            }
+            (flag, _) => dataset_dir(flag, &stored)?,
+        };
         let data = Dataset::open(&dir)?;
         let mesh = data.mesh().clone();
         let mut t = match a.device {
@@ -495,6 +545,12 @@ pub fn train(a: TrainArgs) -> Result<()> {
         if let Some(d) = &a.dataset {
             config.dataset.path = Some(d.clone());
         }
+        // stored absolute, so `--resume` works from any working directory
+        if let Some(p) = &config.dataset.path {
+            config.dataset.path = Some(
+                std::path::absolute(p).with_context(|| format!("dataset path {}", p.display()))?,
+            );
+        }
         if let Some(s) = a.steps {
             config.train.steps = s;
         }
@@ -517,7 +573,19 @@ pub fn train(a: TrainArgs) -> Result<()> {
             data.num_vertices(),
             data.channels()
         );
-        Trainer::new(&a.out, config, &mesh, Arc::new(data))?
+        ensure_empty(&a.out)?;
+        let mut undo = mfm_files::Undo::new();
+        undo.create_dir_all(&a.out)?;
+        for f in [
+            CONFIG_FILE,
+            mfm_fm::checkpoint::FLOW_FILE,
+            mfm_fm::checkpoint::LOG_FILE,
+        ] {
+            undo.file(a.out.join(f));
+        }
+        let trainer = Trainer::new(&a.out, config, &mesh, Arc::new(data))?;
+        fresh = Some(undo);
+        trainer
     };
     println!(
         "training {} parameters on {:?}, step {} of {}",
@@ -549,7 +617,23 @@ pub fn train(a: TrainArgs) -> Result<()> {
             }
         );
     }
-    let summary = trainer.run(&stop, !a.quiet)?;
+    let summary = match trainer.run(&stop, !a.quiet) {
+        Ok(s) => s,
+        Err(e) => {
+            let has_checkpoint =
+                mfm_fm::checkpoint::list_checkpoints(&a.out).is_ok_and(|c| !c.is_empty());
+            if has_checkpoint {
+                // the checkpoints are the user's progress: keep the run
+                if let Some(u) = fresh.take() {
+                    u.keep();
+                }
+            }
+            return Err(e.into());
+        }
+    };
+    if let Some(u) = fresh.take() {
+        u.keep();
+    }
     println!(
         "steps {}..{} in {:.1} s ({:.3} s/step), last loss {}",
         summary.start_step,
@@ -585,12 +669,45 @@ fn dataset_dir(flag: Option<&Path>, config: &RunConfig) -> Result<PathBuf> {
     }
 }
 
+/// The fixed names `mfm sample` writes into its folder (besides
+/// `sample_NNN.ply`).
+const SAMPLE_FILES: [&str; 4] = ["samples.npy", "mesh.ply", "samples.png", "timing.json"];
+
+/// Whether `name` is one of the `sample_NNN.ply` files of `mfm sample`.
+fn is_sample_ply(name: &str) -> bool {
+    name.strip_prefix("sample_")
+        .and_then(|r| r.strip_suffix(".ply"))
+        .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// Output values kept in memory at once while sampling (the rest goes
+/// straight to disk).
+const SAMPLE_CHUNK_BYTES: usize = 64 << 20;
+
 /// Runs `mfm sample`.
 pub fn sample(a: SampleArgs) -> Result<()> {
     if a.n == 0 {
         bail!("--n must be at least 1");
     }
-    let mesh = load_mesh(&a.mesh)?;
+    if a.out.exists() && !a.out.is_dir() {
+        bail!("--out {}: exists and is not a folder", a.out.display());
+    }
+    let existing: Vec<String> = std::fs::read_dir(&a.out)
+        .map(|d| {
+            d.filter_map(|e| e.ok())
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect()
+        })
+        .unwrap_or_default();
+    if !existing.is_empty() && !a.force {
+        bail!(
+            "{} exists and is not empty; choose another --out, or add --force to replace what \
+`mfm sample` writes there ({}, sample_NNN.ply; nothing else is touched)",
+            a.out.display(),
+            SAMPLE_FILES.join(", ")
+        );
+    }
+    let mesh = load_mesh_checked(&a.mesh)?;
     let sampler = Sampler::load(&a.run, Some(a.device.resolve()?))?;
     for w in sampler.surface_warnings(&mesh) {
         eprintln!(
@@ -612,14 +729,76 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     if let Some(m) = a.method {
         opts.method = m;
     }
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create {}", a.out.display()))?;
-    let samples = sampler.sample(&mesh, a.n, a.seed, &opts)?;
-    let (n, v, c) = (samples.samples, samples.vertices, samples.channels);
-    write_npy_f32(&a.out.join("samples.npy"), &samples.data, &[n, v, c])?;
+    let (v, c) = (mesh.num_vertices(), sampler.flow().channels);
+    let n = a.n;
+    let plys = a.ply.min(n);
+    let mut outputs: Vec<PathBuf> = SAMPLE_FILES.iter().map(|f| a.out.join(f)).collect();
+    outputs.extend((0..plys).map(|i| a.out.join(format!("sample_{i:03}.ply"))));
+    let run_files = [
+        CONFIG_FILE,
+        mfm_fm::checkpoint::FLOW_FILE,
+        mfm_fm::checkpoint::WEIGHTS_FILE,
+        mfm_fm::checkpoint::NET_CONFIG_FILE,
+        mfm_fm::checkpoint::CHECKPOINTS_DIR,
+    ]
+    .map(|f| a.run.join(f));
+    let mut inputs: Vec<Option<&Path>> = run_files.iter().map(|p| Some(p.as_path())).collect();
+    inputs.push(mesh_path(&a.mesh));
+    let undo = prepare_outputs(&inputs, &outputs)?;
+    let shape = [n as u64, v as u64, c as u64];
+    mfm_files::space::ensure_space(
+        &a.out.join(SAMPLE_FILES[0]),
+        mfm_files::npy::file_bytes(&shape, 4),
+    )
+    .with_context(|| format!("{n} samples x {v} vertices x {c} channels of f32"))?;
+    // stale sample_NNN.ply of an earlier run (--force): removed, nothing else
+    for name in existing.iter().filter(|f| is_sample_ply(f)) {
+        let path = a.out.join(name);
+        if !outputs.contains(&path) {
+            std::fs::remove_file(&path)
+                .with_context(|| format!("cannot remove the stale {}", path.display()))?;
+        }
+    }
+    let target = sampler.prepare(&mesh)?;
+    let row = v * c;
+    let keep = n.min(a.ply.max(8));
+    let chunk = (SAMPLE_CHUNK_BYTES / (row * 4).max(1))
+        .max(opts.batch)
+        .min(n);
+    let mut file = mfm_files::npy::NpyStream::<f32>::create(&outputs[0], &shape)?;
+    let bar = if n > chunk {
+        indicatif::ProgressBar::new(n as u64)
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let mut kept: Vec<f32> = Vec::with_capacity(keep * row);
+    let (mut seconds, mut noise_seconds) = (0.0, 0.0);
+    let mut first = 0;
+    while first < n {
+        let count = chunk.min(n - first);
+        let part = sampler.sample_on(&target, first, count, a.seed, &opts)?;
+        if let Some((i, vertex, channel, x)) =
+            InMemorySignals::new(part.data.clone(), count, v, c)?.first_non_finite()
+        {
+            bail!(
+                "sample {} is not finite ({x} at vertex {vertex}, channel {channel}): the model in {} diverged; nothing was written",
+                first + i,
+                a.run.display()
+            );
+        }
+        let take = keep.saturating_sub(first).min(count);
+        kept.extend_from_slice(&part.data[..take * row]);
+        file.append(&part.data)?;
+        seconds += part.seconds;
+        noise_seconds += part.noise_seconds;
+        first += count;
+        bar.set_position(first as u64);
+    }
+    bar.finish_and_clear();
+    file.finish()?;
     io::write_ply(a.out.join("mesh.ply"), &mesh, &[])?;
-    let signals = InMemorySignals::new(samples.data.clone(), n, v, c)?;
-    for i in 0..a.ply.min(n) {
+    let signals = InMemorySignals::new(kept, keep, v, c)?;
+    for i in 0..plys {
         let path = a.out.join(format!("sample_{i:03}.ply"));
         if c == 3 {
             // Three channels are vertex positions: write the deformed mesh.
@@ -643,7 +822,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
             io::write_ply(&path, &mesh, &scalars)?;
         }
     }
-    let k = n.min(8);
+    let k = keep.min(8);
     let values: Vec<Vec<f64>> = (0..k).map(|i| channel(&signals, i, 0)).collect();
     let deformed: Vec<TriMesh> = if c == 3 {
         (0..k)
@@ -668,22 +847,24 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         ColorRange::Auto,
         &a.out.join("samples.png"),
     )?;
+    let per_sample = seconds / n as f64;
     let timing = serde_json::json!({
         "samples": n,
         "vertices": v,
         "channels": c,
         "ode_steps": opts.steps,
         "method": format!("{:?}", opts.method).to_lowercase(),
-        "seconds": samples.seconds,
-        "noise_seconds": samples.noise_seconds,
-        "seconds_per_sample": samples.seconds_per_sample(),
+        "seconds": seconds,
+        "noise_seconds": noise_seconds,
+        "seconds_per_sample": per_sample,
     });
     write_json(&a.out.join("timing.json"), &timing)?;
+    undo.keep();
     println!(
         "{n} samples on {} vertices in {:.2} s ({:.1} ms per sample, {} {:?} steps) -> {}",
         v,
-        samples.seconds,
-        samples.seconds_per_sample() * 1e3,
+        seconds,
+        per_sample * 1e3,
         opts.steps,
         opts.method,
         a.out.display()
@@ -693,9 +874,32 @@ pub fn sample(a: SampleArgs) -> Result<()> {
 
 /// Runs `mfm eval`.
 pub fn eval(a: EvalArgs) -> Result<()> {
+    let mut outputs: Vec<PathBuf> = a.out.iter().cloned().collect();
+    if let Some(png) = &a.png {
+        outputs.push(png.clone());
+        outputs.push(sibling_png(png, "samples"));
+        outputs.push(sibling_png(png, "difference"));
+    }
+    let undo = prepare_outputs(
+        &[
+            Some(a.samples.as_path()),
+            a.reference.as_deref(),
+            a.space.as_deref(),
+            a.mesh.as_deref().and_then(mesh_path),
+        ],
+        &outputs,
+    )?;
     let generated = read_npy_f32(&a.samples)?;
+    if let Some((i, vertex, channel, x)) = generated.first_non_finite() {
+        bail!(
+            "{}: sample {i} is not finite ({x} at vertex {vertex}, channel {channel}); metrics need finite samples",
+            a.samples.display()
+        );
+    }
     let Some(reference_dir) = &a.reference else {
-        return eval_plausibility_only(&a, &generated);
+        eval_plausibility_only(&a, &generated)?;
+        undo.keep();
+        return Ok(());
     };
     let reference = Dataset::open(reference_dir)?;
     if generated.num_vertices() != reference.num_vertices() {
@@ -705,6 +909,15 @@ pub fn eval(a: EvalArgs) -> Result<()> {
             generated.num_vertices(),
             reference_dir.display(),
             reference.num_vertices()
+        );
+    }
+    if generated.channels() != reference.channels() {
+        bail!(
+            "{}: samples have {} channels but the reference set {} has {}",
+            a.samples.display(),
+            generated.channels(),
+            reference_dir.display(),
+            reference.channels()
         );
     }
     let mesh = reference.mesh().clone();
@@ -790,6 +1003,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         let img = render::render_mesh(&mesh, Some(&diff), &opts)?;
         render::save_png(&img, &diff_png)?;
     }
+    undo.keep();
     Ok(())
 }
 
@@ -807,7 +1021,7 @@ fn eval_plausibility_only(a: &EvalArgs, generated: &InMemorySignals) -> Result<(
             space_path.display()
         )
     })?;
-    let mesh = load_mesh(mesh_spec)?;
+    let mesh = load_mesh_checked(mesh_spec)?;
     if generated.num_vertices() != mesh.num_vertices() || generated.channels() != 3 {
         bail!(
             "{}: samples are [{}, {}, {}] but {mesh_spec} has {} vertices (positions need 3 channels)",
@@ -972,6 +1186,17 @@ fn save_grid(
     Ok(())
 }
 
+/// Creates the (empty or missing) dataset folder `out` and records it and
+/// the entries a `mfm dataset` command writes there for removal on failure.
+fn dataset_undo(out: &Path, entries: &[&str]) -> Result<mfm_files::Undo> {
+    let mut undo = mfm_files::Undo::new();
+    undo.create_dir_all(out)?;
+    for e in entries {
+        undo.file(out.join(e));
+    }
+    Ok(undo)
+}
+
 fn ensure_empty(dir: &Path) -> Result<()> {
     if let Ok(mut entries) = std::fs::read_dir(dir)
         && entries.next().is_some()
@@ -984,49 +1209,17 @@ fn ensure_empty(dir: &Path) -> Result<()> {
     Ok(())
 }
 
-fn write_npy_f32(path: &Path, data: &[f32], shape: &[usize]) -> Result<()> {
-    let shape: Vec<u64> = shape.iter().map(|&s| s as u64).collect();
-    crate::output::write_atomic(path, |w| {
-        use npyz::WriterBuilder;
-        let mut npy = npyz::WriteOptions::new()
-            .default_dtype()
-            .shape(&shape)
-            .writer(w)
-            .begin_nd()?;
-        npy.extend(data.iter().copied())?;
-        npy.finish()
-    })
-}
-
 /// Reads a `.npy` of shape `[N, V, C]` or `[N, V]` (f32 or f64) as signals.
 fn read_npy_f32(path: &Path) -> Result<InMemorySignals> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let npy = npyz::NpyFile::new(&bytes[..])
-        .with_context(|| format!("{}: not a .npy file", path.display()))?;
-    let shape: Vec<usize> = npy.shape().iter().map(|&s| s as usize).collect();
-    let (n, v, c) = match shape[..] {
+    let a = mfm_files::npy::read::<f32>(path)?;
+    let (n, v, c) = match a.shape[..] {
         [n, v] => (n, v, 1),
         [n, v, c] => (n, v, c),
         _ => bail!(
-            "{}: expected shape [N, V] or [N, V, C], found {shape:?}",
-            path.display()
-        ),
-    };
-    let data: Vec<f32> = match npy.dtype() {
-        npyz::DType::Plain(t) if t.type_char() == npyz::TypeChar::Float && t.size_field() == 4 => {
-            npy.into_vec::<f32>()?
-        }
-        npyz::DType::Plain(t) if t.type_char() == npyz::TypeChar::Float && t.size_field() == 8 => {
-            npy.into_vec::<f64>()?
-                .into_iter()
-                .map(|x| x as f32)
-                .collect()
-        }
-        other => bail!(
-            "{}: expected float32 or float64 values, found {}",
+            "{}: expected shape [N, V] or [N, V, C], found {:?}",
             path.display(),
-            other.descr()
+            a.shape
         ),
     };
-    InMemorySignals::new(data, n, v, c).with_context(|| format!("{}", path.display()))
+    InMemorySignals::new(a.values, n, v, c).with_context(|| format!("{}", path.display()))
 }

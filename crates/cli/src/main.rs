@@ -30,11 +30,39 @@ fn main() {
     // Keeps freed tensor memory for reuse (large speed-up for training on
     // glibc); harmless for the commands that do not use libtorch.
     mfm_net::runtime::tune_allocator();
-    let cli = Cli::parse();
+    let cli = parse();
     if let Err(e) = commands::run(cli.command) {
-        eprintln!("mfm: error: {}", one_line(&e));
+        eprintln!("mfm: error: {}", printable(&one_line(&e)));
         std::process::exit(1);
     }
+}
+
+/// Parses the command line, reading `--tau -1` as the value `-1` of `--tau`
+/// (every subcommand accepts negative numbers as values; the commands then
+/// reject out-of-range ones by name) instead of clap's suggestion to write
+/// `-- -1`.
+fn parse() -> Cli {
+    use clap::{CommandFactory, FromArgMatches};
+    fn negatives(cmd: clap::Command) -> clap::Command {
+        cmd.allow_negative_numbers(true).mut_subcommands(negatives)
+    }
+    let matches = negatives(Cli::command()).get_matches();
+    Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
+}
+
+/// `text` with control characters (escape sequences, carriage returns,
+/// NUL...) shown as escapes, so a message quoting a file's content cannot
+/// drive the terminal.
+fn printable(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
 }
 
 /// The error and its causes on one line, `outer: inner: ...`, leaving out a
@@ -57,7 +85,16 @@ fn one_line(e: &anyhow::Error) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::one_line;
+    use super::{one_line, printable};
+
+    #[test]
+    fn control_characters_are_escaped() {
+        assert_eq!(
+            printable("bad token \u{1b}[2J here\r\n"),
+            "bad token \\u{1b}[2J here\\r\\n"
+        );
+        assert_eq!(printable("plain · text"), "plain · text");
+    }
 
     #[test]
     fn a_cause_already_in_its_wrapper_is_printed_once() {

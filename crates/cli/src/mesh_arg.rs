@@ -1,6 +1,7 @@
 //! Resolving a MESH argument: a file path or a `builtin:` procedural mesh.
 
 use anyhow::{Context, Result, bail};
+use mfm_geometry::validate::{MeshProblem, MeshReport};
 use mfm_geometry::{TriMesh, io, procedural};
 use std::path::Path;
 
@@ -60,4 +61,39 @@ pub fn load_mesh(spec: &str) -> Result<TriMesh> {
         ),
     };
     Ok(mesh)
+}
+
+/// The file a MESH argument names, `None` for a built-in mesh.
+pub fn mesh_path(spec: &str) -> Option<&Path> {
+    (!spec.starts_with("builtin:")).then(|| Path::new(spec))
+}
+
+/// [`load_mesh`] for a command that computes on the mesh (operators, eigs,
+/// noise, spectrum, datasets, sampling, remeshing): the problems `mfm info`
+/// reports ([`MeshReport`]) are warnings on standard error, and duplicate
+/// faces, which every operator would count twice, are an error. `info`,
+/// `convert` and `render` take any mesh as it is.
+pub fn load_mesh_checked(spec: &str) -> Result<TriMesh> {
+    let mesh = load_mesh(spec)?;
+    check_mesh(spec, &mesh)?;
+    Ok(mesh)
+}
+
+/// The policy of [`load_mesh_checked`] on a mesh already loaded.
+pub fn check_mesh(spec: &str, mesh: &TriMesh) -> Result<()> {
+    let report = MeshReport::new(mesh);
+    if let Some(p) = report
+        .problems
+        .iter()
+        .find(|p| matches!(p, MeshProblem::DuplicateFaces { .. }))
+    {
+        bail!(
+            "{spec}: {p}; every operator would count their area twice: remove them first \
+(`mfm info {spec}` lists the mesh's problems)"
+        );
+    }
+    for p in &report.problems {
+        eprintln!("warning: {spec}: {p} (`mfm info {spec}` shows the full report)");
+    }
+    Ok(())
 }

@@ -1,45 +1,30 @@
-//! Writing results: Matrix Market, NumPy `.npy` and JSON, each atomically
-//! (a temporary file in the target folder, renamed into place), so a failed
-//! run never leaves a half-written file where a good one was.
+//! Writing results: Matrix Market, NumPy `.npy` and JSON, each through
+//! [`mfm_files::write_atomic`] (a temporary file in the target folder,
+//! synced, renamed into place; folders, devices and FIFOs refused, links
+//! followed), so a failed run never leaves a half-written file where a good
+//! one was.
 
 use anyhow::{Context, Result};
 use faer::sparse::SparseColMat;
-use std::io::{BufWriter, Write};
-use std::path::Path;
+use std::io::Write;
+use std::path::{Path, PathBuf};
 
-/// Writes `bytes` produced by `fill` to `path` atomically.
+/// Writes what `fill` produces to `path` atomically, creating the folder.
 pub fn write_atomic(
     path: &Path,
     fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> Result<()> {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create folder {}", dir.display()))?;
-    let name = path
-        .file_name()
-        .with_context(|| format!("{} is not a file path", path.display()))?;
-    let tmp = dir.join(format!(
-        ".{}.tmp{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let result = (|| -> std::io::Result<()> {
-        let file = std::fs::File::create(&tmp)?;
-        let mut w = BufWriter::new(file);
-        fill(&mut w)?;
-        w.flush()?;
-        w.get_ref().sync_all()?;
-        Ok(())
-    })();
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e).with_context(|| format!("cannot write {}", path.display()));
+    create_parent(path)?;
+    Ok(mfm_files::write_atomic(path, fill)?)
+}
+
+/// Creates the folder `path` will be written into.
+pub fn create_parent(path: &Path) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create folder {}", dir.display()))?;
     }
-    std::fs::rename(&tmp, path)
-        .with_context(|| format!("cannot move the finished file to {}", path.display()))
+    Ok(())
 }
 
 /// Writes a sparse matrix in Matrix Market coordinate format (1-based,
@@ -63,21 +48,8 @@ pub fn write_matrix_market(path: &Path, m: &SparseColMat<usize, f64>) -> Result<
 
 /// Writes `data` (row-major, `shape`) as a little-endian `f64` `.npy` file.
 pub fn write_npy(path: &Path, data: &[f64], shape: &[u64]) -> Result<()> {
-    anyhow::ensure!(
-        shape.iter().product::<u64>() == data.len() as u64,
-        "internal error: shape {shape:?} does not match {} values",
-        data.len()
-    );
-    write_atomic(path, |w| {
-        use npyz::WriterBuilder;
-        let mut npy = npyz::WriteOptions::new()
-            .default_dtype()
-            .shape(shape)
-            .writer(w)
-            .begin_nd()?;
-        npy.extend(data.iter().copied())?;
-        npy.finish()
-    })
+    create_parent(path)?;
+    Ok(mfm_files::npy::write(path, data, shape)?)
 }
 
 /// Writes pretty JSON.
@@ -86,4 +58,28 @@ pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
         serde_json::to_writer_pretty(&mut *w, value).map_err(std::io::Error::other)?;
         writeln!(w)
     })
+}
+
+/// Before a command writes anything: refuses outputs that are inputs, lie
+/// in an input folder, name one file twice or are not regular files
+/// ([`mfm_files::Outputs`]), creates the outputs' folders, and returns an
+/// [`mfm_files::Undo`] that removes the folders and files the command
+/// creates unless it succeeds (`undo.keep()`).
+pub fn prepare_outputs(inputs: &[Option<&Path>], outputs: &[PathBuf]) -> Result<mfm_files::Undo> {
+    let mut guard = mfm_files::Outputs::new();
+    for input in inputs.iter().flatten() {
+        guard = guard.input(input);
+    }
+    for out in outputs {
+        guard = guard.output(out);
+    }
+    guard.check()?;
+    let mut undo = mfm_files::Undo::new();
+    for out in outputs {
+        if let Some(dir) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+            undo.create_dir_all(dir)?;
+        }
+        undo.file(out);
+    }
+    Ok(undo)
 }

@@ -8,7 +8,7 @@ use mfm_fm::deformations::{Damage, damaged_mesh};
 use mfm_geometry::subdivide;
 use std::path::PathBuf;
 
-use crate::mesh_arg::load_mesh;
+use crate::mesh_arg::{load_mesh_checked, mesh_path};
 
 /// Arguments of `mfm remesh`.
 #[derive(Args)]
@@ -43,7 +43,11 @@ pub fn run(a: RemeshArgs) -> Result<()> {
             a.subdivide
         );
     }
-    let mut mesh = load_mesh(&a.mesh)?;
+    let undo = crate::output::prepare_outputs(
+        &[mesh_path(&a.mesh), a.space.as_deref()],
+        std::slice::from_ref(&a.out),
+    )?;
+    let mut mesh = load_mesh_checked(&a.mesh)?;
     let input = (mesh.num_vertices(), mesh.num_faces());
     for _ in 0..a.subdivide {
         mesh = subdivide::midpoint(&mesh)?;
@@ -62,6 +66,7 @@ pub fn run(a: RemeshArgs) -> Result<()> {
         mesh = damaged_mesh(&mesh, &space, damage, a.seed)?;
     }
     crate::commands::write_mesh(&mesh, &a.out)?;
+    undo.keep();
     println!(
         "{}: {} vertices, {} faces (from {} vertices, {} faces)",
         a.out.display(),

@@ -1,8 +1,8 @@
 //! `mfm eigs`, `mfm noise`, `mfm spectrum`: eigenpairs, noise samples and
 //! their spectral statistics.
 
-use crate::mesh_arg::load_mesh;
-use crate::output::{write_json, write_npy};
+use crate::mesh_arg::{load_mesh_checked, mesh_path};
+use crate::output::{prepare_outputs, write_json, write_npy};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use mfm_geometry::operators::Operators;
@@ -10,8 +10,7 @@ use mfm_geometry::render::{ColorRange, Colormap, RenderOptions, render_mesh, sav
 use mfm_noise::plots::{self, HistogramPanel, VarianceSeries};
 use mfm_noise::spectrum::compare;
 use mfm_noise::{
-    DEFAULT_TAU, NoiseBatch, NoiseKind, NoiseSampler, SpectralAnalyzer, SpectrumComparison,
-    SpectrumReport,
+    DEFAULT_TAU, NoiseKind, NoiseSampler, SpectralAnalyzer, SpectrumComparison, SpectrumReport,
 };
 use mfm_solver::{EigenOptions, generalized_eigenpairs};
 use std::path::Path;
@@ -36,18 +35,21 @@ pub fn eigs(spec: &str, k: usize, out: &Path) -> Result<()> {
     if k == 0 {
         bail!("--k must be at least 1");
     }
-    let mesh = load_mesh(spec)?;
+    let mesh = load_mesh_checked(spec)?;
     let n = mesh.num_vertices();
     if k > n {
         bail!("{spec}: --k {k} exceeds the vertex count {n}");
     }
+    let outputs: Vec<std::path::PathBuf> = ["eigenvalues.npy", "eigenvectors.npy", "summary.json"]
+        .iter()
+        .map(|f| out.join(f))
+        .collect();
+    let undo = prepare_outputs(&[mesh_path(spec)], &outputs)?;
     let ops = Operators::new(&mesh).with_context(|| format!("{spec}: cannot build operators"))?;
     let start = Instant::now();
     let pairs = generalized_eigenpairs(&ops.laplacian, &ops.mass, k, &EigenOptions::default())
         .with_context(|| format!("{spec}: eigensolve failed"))?;
     let seconds = start.elapsed().as_secs_f64();
-    std::fs::create_dir_all(out)
-        .with_context(|| format!("cannot create folder {}", out.display()))?;
     let mut vectors = Vec::with_capacity(n * k);
     for v in 0..n {
         for j in 0..k {
@@ -72,6 +74,7 @@ pub fn eigs(spec: &str, k: usize, out: &Path) -> Result<()> {
 eigenvalues ascending; eigenvectors are the columns of the [V, k] array, phi^T M phi = 1",
     };
     write_json(&out.join("summary.json"), &summary)?;
+    undo.keep();
     println!(
         "{k} eigenpairs of {spec} ({n} vertices) in {seconds:.2} s ({:?}); lambda in [{:.4e}, {:.4e}]; wrote {}",
         pairs.info.method,
@@ -223,47 +226,57 @@ pub fn noise(
         bail!("--samples and --channels must be at least 1");
     }
     let kind = kind.to_kind()?;
-    let mesh = load_mesh(spec)?;
+    if out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"))
+    {
+        bail!(
+            "--out {}: the samples go to --out and their JSON summary beside it with the extension .json; give --out a .npy name",
+            out.display()
+        );
+    }
+    let json = out.with_extension("json");
+    let mut outputs = vec![out.to_path_buf(), json.clone()];
+    outputs.extend(png.map(Path::to_path_buf));
+    let mesh = load_mesh_checked(spec)?;
     let v = mesh.num_vertices();
-    let values = samples
-        .checked_mul(v)
-        .and_then(|x| x.checked_mul(channels))
-        .filter(|&x| x <= 1 << 31)
-        .with_context(|| {
-            format!(
-                "{samples} samples x {v} vertices x {channels} channels is too large for one file"
-            )
-        })?;
+    let shape = [samples as u64, v as u64, channels as u64];
+    let bytes = mfm_files::npy::file_bytes(&shape, 8);
+    let undo = prepare_outputs(&[mesh_path(spec)], &outputs)?;
+    mfm_files::space::ensure_space(out, bytes).with_context(|| {
+        format!("{samples} samples x {v} vertices x {channels} channels of f64")
+    })?;
     let start = Instant::now();
     let sampler = NoiseSampler::new(&mesh, kind)
         .with_context(|| format!("{spec}: cannot set up {kind} noise"))?;
     let setup = start.elapsed().as_secs_f64();
-    let mut data = Vec::with_capacity(values);
+    // Streamed to disk CHUNK samples at a time: memory stays at one chunk
+    // whatever the output's size.
+    let mut file = mfm_files::npy::NpyStream::<f64>::create(out, &shape)?;
     let bar = progress(samples as u64, "sampling");
+    let mass = sampler.mass();
+    let mut energy = 0.0;
+    let mut first_signal: Option<Vec<f64>> = None;
     let mut first = 0;
     while first < samples {
         let count = CHUNK.min(samples - first);
         let batch = sampler.sample_range(first, count, channels, seed)?;
-        data.extend_from_slice(batch.data());
+        for s in 0..count {
+            for c in 0..channels {
+                let f = batch.signal(s, c);
+                energy += f.iter().zip(mass).map(|(x, m)| m * x * x).sum::<f64>();
+            }
+        }
+        if first_signal.is_none() {
+            first_signal = Some(batch.signal(0, 0));
+        }
+        file.append(batch.data())?;
         first += count;
         bar.set_position(first as u64);
     }
     bar.finish_and_clear();
-    let batch = NoiseBatch::from_vec(data, samples, v, channels)?;
-    let mass = sampler.mass();
-    let mut energy = 0.0;
-    for s in 0..samples {
-        for c in 0..channels {
-            let f = batch.signal(s, c);
-            energy += f.iter().zip(mass).map(|(x, m)| m * x * x).sum::<f64>();
-        }
-    }
+    file.finish()?;
     let mean_energy = energy / (samples * channels) as f64;
-    write_npy(
-        out,
-        batch.data(),
-        &[samples as u64, v as u64, channels as u64],
-    )?;
     let summary = NoiseSummary {
         mesh: spec,
         kind,
@@ -276,7 +289,6 @@ pub fn noise(
         layout: "[samples, vertices, channels], row-major f64",
         mean_energy,
     };
-    let json = out.with_extension("json");
     write_json(&json, &summary)?;
     println!(
         "{samples} x {channels} {kind} samples on {spec} ({v} vertices; setup {setup:.3} s, total {:.3} s); \
@@ -294,10 +306,12 @@ mean f^T M f = {mean_energy:.4e}; wrote {} and {}",
             range: ColorRange::Symmetric,
             ..Default::default()
         };
-        let img = render_mesh(&mesh, Some(&batch.signal(0, 0)), &opts)?;
+        let first = first_signal.unwrap_or_default();
+        let img = render_mesh(&mesh, Some(&first), &opts)?;
         save_png(&img, png)?;
         println!("wrote {}", png.display());
     }
+    undo.keep();
     Ok(())
 }
 
@@ -349,11 +363,18 @@ pub fn spectrum(args: &SpectrumArgs<'_>) -> Result<()> {
     if args.samples < 2 || args.k == 0 {
         bail!("--samples must be at least 2 and --k at least 1");
     }
+    let mut outputs = vec![args.out.to_path_buf()];
+    if let Some(dir) = args.plots {
+        outputs.push(dir.join("variance.png"));
+        outputs.push(dir.join("coefficients.png"));
+    }
+    let inputs: Vec<Option<&Path>> = args.meshes.iter().map(|m| mesh_path(m)).collect();
+    let undo = prepare_outputs(&inputs, &outputs)?;
     let mut meshes = Vec::new();
     let mut series = Vec::new();
     let mut histograms: Vec<Vec<(String, Vec<f64>)>> = vec![Vec::new(); args.coefficients.len()];
     for spec in args.meshes {
-        let mesh = load_mesh(spec)?;
+        let mesh = load_mesh_checked(spec)?;
         let v = mesh.num_vertices();
         if args.k > v {
             bail!("{spec}: --k {} exceeds the vertex count {v}", args.k);
@@ -423,8 +444,6 @@ max |corr| = {:.3} (sampling level {:.3}); mean f^T M f = {:.4e}",
     )?;
     println!("wrote {}", args.out.display());
     if let Some(dir) = args.plots {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("cannot create folder {}", dir.display()))?;
         let variance = dir.join("variance.png");
         plots::variance_plot(
             &variance,
@@ -449,5 +468,6 @@ max |corr| = {:.3} (sampling level {:.3}); mean f^T M f = {:.4e}",
             println!("wrote {}", hist.display());
         }
     }
+    undo.keep();
     Ok(())
 }

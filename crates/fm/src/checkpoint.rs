@@ -18,6 +18,7 @@
 //!                            size and CRC-32 of every other file
 //!   model.safetensors        the final model (when training finished)
 //!   model.json
+//!   model.state.json         size and CRC-32 of the two files above
 //! ```
 //!
 //! A checkpoint is written into a temporary folder (`checkpoints/.tmp-...`),
@@ -30,7 +31,6 @@
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use mfm_geometry::frame::{CanonicalFrame, SurfaceSize};
@@ -49,6 +49,8 @@ pub const WEIGHTS_FILE: &str = "model.safetensors";
 pub const NET_CONFIG_FILE: &str = "model.json";
 /// Adam state (safetensors).
 pub const OPTIMIZER_FILE: &str = "optimizer.safetensors";
+/// [`FinalModelRecord`] (JSON): checksums of the final model.
+pub const FINAL_RECORD_FILE: &str = "model.state.json";
 /// [`CheckpointState`] (JSON).
 pub const STATE_FILE: &str = "state.json";
 /// The training log (CSV) in the run folder.
@@ -220,24 +222,17 @@ pub struct CheckpointInfo {
     pub dir: PathBuf,
 }
 
-/// Writes `bytes` to `path` through a temporary file in the same folder,
-/// synced, then renamed over `path`.
+/// Writes `bytes` to `path` with [`mfm_files::write_atomic`]: a temporary
+/// file in the same folder, synced, renamed over `path`; removed on failure.
 ///
 /// # Errors
-/// [`FmError::Io`] naming the file.
+/// [`FmError::Io`] naming the file (also for a folder, device or FIFO at
+/// `path`, which is never replaced).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path
-        .file_name()
-        .and_then(|n| n.to_str())
-        .unwrap_or("file")
-        .to_owned();
-    let tmp = path.with_file_name(format!(".{name}.tmp-{}", std::process::id()));
-    {
-        let mut f = File::create(&tmp).map_err(|e| FmError::io(&tmp, e))?;
-        f.write_all(bytes).map_err(|e| FmError::io(&tmp, e))?;
-        f.sync_all().map_err(|e| FmError::io(&tmp, e))?;
-    }
-    std::fs::rename(&tmp, path).map_err(|e| FmError::io(path, e))
+    mfm_files::write_atomic(path, |w| w.write_all(bytes)).map_err(|e| match e {
+        mfm_files::FileError::Io { path, source } => FmError::io(path, source),
+        other => FmError::io(path, std::io::Error::other(other.to_string())),
+    })
 }
 
 /// Size and CRC-32 of a file.
@@ -357,14 +352,21 @@ pub fn verify_checkpoint(dir: &Path) -> Result<CheckpointState> {
             ));
         }
     }
-    for (name, expected) in &state.files {
+    verify_records(dir, &state.files, "checkpoint file")?;
+    Ok(state)
+}
+
+/// Compares every file of `records` in `dir` with its recorded size and
+/// CRC-32; `what` names the files in the message.
+fn verify_records(dir: &Path, records: &BTreeMap<String, FileRecord>, what: &str) -> Result<()> {
+    for (name, expected) in records {
         let path = dir.join(name);
         let found = file_record(&path)?;
         if found.bytes != expected.bytes {
             return Err(FmError::format(
                 &path,
                 format!(
-                    "checkpoint file has {} bytes, expected {} (truncated or overwritten)",
+                    "{what} has {} bytes, expected {} (truncated or overwritten)",
                     found.bytes, expected.bytes
                 ),
             ));
@@ -373,13 +375,59 @@ pub fn verify_checkpoint(dir: &Path) -> Result<CheckpointState> {
             return Err(FmError::format(
                 &path,
                 format!(
-                    "checkpoint file is corrupted: CRC-32 {:08x}, expected {:08x}",
+                    "{what} is corrupted: CRC-32 {:08x}, expected {:08x}",
                     found.crc32, expected.crc32
                 ),
             ));
         }
     }
-    Ok(state)
+    Ok(())
+}
+
+/// `model.state.json` of a run folder: size and CRC-32 of the final model's
+/// files, written right after them.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FinalModelRecord {
+    /// [`WEIGHTS_FILE`] and [`NET_CONFIG_FILE`], by name.
+    pub files: BTreeMap<String, FileRecord>,
+}
+
+/// Records the checksums of the final model in `run_dir` ([`FINAL_RECORD_FILE`]).
+///
+/// # Errors
+/// [`FmError::Io`] naming the file.
+pub fn write_final_record(run_dir: &Path) -> Result<()> {
+    let mut files = BTreeMap::new();
+    for name in [WEIGHTS_FILE, NET_CONFIG_FILE] {
+        files.insert(name.to_owned(), file_record(&run_dir.join(name))?);
+    }
+    let path = run_dir.join(FINAL_RECORD_FILE);
+    let json = serde_json::to_string_pretty(&FinalModelRecord { files })
+        .map_err(|e| FmError::format(&path, e.to_string()))?;
+    write_atomic(&path, json.as_bytes())
+}
+
+/// Checks the final model of `run_dir` against its [`FINAL_RECORD_FILE`];
+/// a run written before the record existed (no such file) passes.
+///
+/// # Errors
+/// [`FmError::Format`] naming the file that is truncated or corrupted, or an
+/// unreadable record.
+pub fn verify_final_model(run_dir: &Path) -> Result<()> {
+    let path = run_dir.join(FINAL_RECORD_FILE);
+    let text = match std::fs::read_to_string(&path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(FmError::io(&path, e)),
+    };
+    let record: FinalModelRecord = serde_json::from_str(&text).map_err(|e| {
+        FmError::format(
+            &path,
+            format!("unreadable model record (truncated or corrupted?): {e}"),
+        )
+    })?;
+    verify_records(run_dir, &record.files, "the final model file")
 }
 
 /// Writes the checkpoint after `state.step` steps: `fill` writes the

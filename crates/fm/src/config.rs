@@ -69,6 +69,7 @@
 //! assert_eq!(back, cfg);
 //! ```
 
+use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -928,6 +929,110 @@ impl RunConfig {
     pub fn write_toml_file(&self, path: impl AsRef<Path>) -> Result<()> {
         crate::checkpoint::write_atomic(path.as_ref(), self.to_toml_string()?.as_bytes())
     }
+}
+
+/// Fields of a run's configuration that may change when it is resumed:
+/// how long it runs, how it checkpoints, where it runs and where its data
+/// now lives. Every other field shapes the model or the optimisation.
+pub const RESUMABLE_FIELDS: &[&str] = &[
+    "dataset.path",
+    "train.steps",
+    "train.checkpoint_every",
+    "train.keep_checkpoints",
+    "train.threads",
+    "train.device",
+];
+
+/// One field that differs between two configurations.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ConfigChange {
+    /// Dotted TOML path, e.g. `model.width`.
+    pub field: String,
+    /// The value in the first configuration (TOML; `-` when absent).
+    pub before: String,
+    /// The value in the second.
+    pub after: String,
+}
+
+impl fmt::Display for ConfigChange {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{} {} -> {}", self.field, self.before, self.after)
+    }
+}
+
+impl RunConfig {
+    /// The fields in which `other` differs from `self`, in TOML order of
+    /// their dotted paths.
+    ///
+    /// # Errors
+    /// As [`RunConfig::to_toml_string`].
+    pub fn changes_to(&self, other: &RunConfig) -> Result<Vec<ConfigChange>> {
+        fn flatten(prefix: &str, v: &toml::Value, out: &mut BTreeMap<String, String>) {
+            match v {
+                toml::Value::Table(t) => {
+                    for (k, x) in t {
+                        let key = if prefix.is_empty() {
+                            k.clone()
+                        } else {
+                            format!("{prefix}.{k}")
+                        };
+                        flatten(&key, x, out);
+                    }
+                }
+                other => {
+                    out.insert(prefix.to_owned(), other.to_string());
+                }
+            }
+        }
+        let table = |c: &RunConfig| -> Result<BTreeMap<String, String>> {
+            let v: toml::Value = toml::from_str(&c.to_toml_string()?).map_err(|e| {
+                FmError::Config(format!("internal: a configuration does not read back: {e}"))
+            })?;
+            let mut out = BTreeMap::new();
+            flatten("", &v, &mut out);
+            Ok(out)
+        };
+        let (a, b) = (table(self)?, table(other)?);
+        let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+        Ok(keys
+            .into_iter()
+            .filter(|k| a.get(*k) != b.get(*k))
+            .map(|k| ConfigChange {
+                field: k.clone(),
+                before: a.get(k).cloned().unwrap_or_else(|| "-".into()),
+                after: b.get(k).cloned().unwrap_or_else(|| "-".into()),
+            })
+            .collect())
+    }
+}
+
+/// Where the dataset of a run is now: `stored` when it is a folder;
+/// otherwise, for a run folder and its dataset moved together (a project
+/// copied to another machine), the first folder holding a dataset manifest
+/// among `A/T` for `A` an ancestor of `run_dir` (up to 3 levels) and `T` the
+/// last 1 to 3 components of `stored`. `None` when nothing is found.
+pub fn locate_dataset(stored: &Path, run_dir: &Path) -> Option<PathBuf> {
+    if stored.is_dir() {
+        return Some(stored.to_path_buf());
+    }
+    let run = std::path::absolute(run_dir).ok()?;
+    let parts: Vec<&std::ffi::OsStr> = stored
+        .components()
+        .filter_map(|c| match c {
+            std::path::Component::Normal(p) => Some(p),
+            _ => None,
+        })
+        .collect();
+    for ancestor in run.ancestors().skip(1).take(3) {
+        for keep in 1..=parts.len().min(3) {
+            let mut candidate = ancestor.to_path_buf();
+            candidate.extend(&parts[parts.len() - keep..]);
+            if candidate.join(crate::dataset::MANIFEST_FILE).is_file() {
+                return Some(candidate);
+            }
+        }
+    }
+    None
 }
 
 #[cfg(test)]

@@ -278,6 +278,14 @@ impl Dataset {
     /// files, or a truncated array; [`FmError::ReadMesh`] for a bad mesh.
     pub fn open(dir: impl AsRef<Path>) -> Result<Self> {
         let dir = dir.as_ref().to_path_buf();
+        if dir.is_file() {
+            return Err(FmError::format(
+                &dir,
+                format!(
+                    "this is a file, not a dataset folder (a folder with {MANIFEST_FILE}, {MESH_FILE} and {SIGNALS_FILE}, as `mfm dataset` writes)"
+                ),
+            ));
+        }
         if !dir.is_dir() {
             return Err(FmError::io(
                 &dir,
@@ -400,6 +408,21 @@ impl Dataset {
             for (x, b) in chunk.iter_mut().zip(buf.chunks_exact(VALUE_BYTES as usize)) {
                 *x = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
             }
+        }
+        if let Some(k) = out.iter().position(|x| !x.is_finite()) {
+            let row = self.row_values();
+            let (signal, vertex, channel) = (
+                first + k / row,
+                (k % row) / self.channels,
+                k % self.channels,
+            );
+            return Err(FmError::format(
+                &self.signals_path,
+                format!(
+                    "signal {signal}, vertex {vertex}, channel {channel} is {} (a dataset must hold finite values)",
+                    out[k]
+                ),
+            ));
         }
         Ok(())
     }

@@ -231,8 +231,22 @@ impl Sampler {
     /// checkpoint.
     pub fn load(run_dir: impl AsRef<Path>, device: Option<Device>) -> Result<Self> {
         let run_dir = run_dir.as_ref();
+        if !run_dir.is_dir() {
+            return Err(FmError::io(
+                run_dir,
+                std::io::Error::new(
+                    std::io::ErrorKind::NotFound,
+                    if run_dir.exists() {
+                        "not a folder (a run folder is what `mfm train --out` writes)"
+                    } else {
+                        "no such run folder"
+                    },
+                ),
+            ));
+        }
         let weights = run_dir.join(WEIGHTS_FILE);
         if weights.is_file() {
+            checkpoint::verify_final_model(run_dir)?;
             return Self::load_files(&weights, &run_dir.join(FLOW_FILE), device);
         }
         let (best, rejected) = checkpoint::newest_valid_checkpoint(run_dir)?;

@@ -100,6 +100,20 @@ impl InMemorySignals {
         })
     }
 
+    /// The first value that is NaN or infinite, as `(signal, vertex,
+    /// channel, value)`, scanning in storage order; `None` when all are
+    /// finite.
+    pub fn first_non_finite(&self) -> Option<(usize, usize, usize, f32)> {
+        let k = self.data.iter().position(|x| !x.is_finite())?;
+        let row = self.vertices * self.channels;
+        Some((
+            k / row,
+            (k % row) / self.channels,
+            k % self.channels,
+            self.data[k],
+        ))
+    }
+
     /// The values, row-major `[N, V, C]`.
     pub fn data(&self) -> &[f32] {
         &self.data

@@ -605,6 +605,41 @@ fn in_frame(
     }
 }
 
+/// The configuration a resumed run goes on with: the checkpoint's, with the
+/// edits made since to the run folder's `config.toml` when they are all in
+/// [`RESUMABLE_FIELDS`](crate::config::RESUMABLE_FIELDS).
+fn with_resumable_edits(run_dir: &Path, saved: RunConfig, step: u64) -> Result<RunConfig> {
+    let path = run_dir.join(CONFIG_FILE);
+    if !path.exists() {
+        return Ok(saved);
+    }
+    let edited = RunConfig::from_toml_file(&path)?;
+    let changes = saved.changes_to(&edited)?;
+    let refused: Vec<String> = changes
+        .iter()
+        .filter(|c| !crate::config::RESUMABLE_FIELDS.contains(&c.field.as_str()))
+        .map(ToString::to_string)
+        .collect();
+    if !refused.is_empty() {
+        return Err(FmError::Config(format!(
+            "{} was edited after the checkpoint at step {step}: {}; a resumed run cannot change \
+             these (only {} can): undo the edit, or start a new run with --config",
+            path.display(),
+            refused.join(", "),
+            crate::config::RESUMABLE_FIELDS.join(", ")
+        )));
+    }
+    if edited.train.steps < step {
+        return Err(FmError::Config(format!(
+            "{}: train.steps = {} is below the checkpoint's step {step}",
+            path.display(),
+            edited.train.steps
+        )));
+    }
+    edited.validate()?;
+    Ok(edited)
+}
+
 /// Rewrites the log keeping the header and the rows with `step <= keep`
 /// (creates it with only the header when missing).
 fn truncate_log(path: &Path, keep: u64) -> Result<()> {
@@ -759,7 +794,8 @@ impl Trainer {
             });
             return Ok(t);
         };
-        let config = with_device(RunConfig::from_toml_file(info.dir.join(CONFIG_FILE))?);
+        let saved = RunConfig::from_toml_file(info.dir.join(CONFIG_FILE))?;
+        let config = with_device(with_resumable_edits(&run_dir, saved, state.step)?);
         let flow = FlowSpec::read(info.dir.join(FLOW_FILE))?;
         check_signals(mesh, signals.as_ref())?;
         if flow.channels != signals.channels() {
@@ -1138,6 +1174,7 @@ impl Trainer {
         let model = if finished {
             let path = self.run_dir.join(WEIGHTS_FILE);
             self.net.save(&path)?;
+            checkpoint::write_final_record(&self.run_dir)?;
             Some(path)
         } else {
             None

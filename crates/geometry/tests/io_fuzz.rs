@@ -21,6 +21,12 @@ fn parse_all(bytes: &[u8]) {
         if let Ok((mesh, scalars)) = io::read_mesh_with_scalars_from_bytes(bytes, format) {
             let n = mesh.num_vertices();
             assert!(mesh.faces().iter().flatten().all(|&i| (i as usize) < n));
+            // every element costs at least a byte of input: nothing was
+            // allocated from a count the file could not back
+            assert!(
+                n <= bytes.len() && mesh.num_faces() <= bytes.len(),
+                "{format}"
+            );
             assert!(scalars.iter().all(|(_, s)| s.len() == n));
         }
     }

@@ -1025,3 +1025,66 @@ fn readers_and_ply_writer_agree_with_libigl() {
         assert!(ours_f == f, "{}: faces differ from libigl", path.display());
     }
 }
+
+#[test]
+fn data_after_the_declared_elements_is_an_error() {
+    let mesh = mfm_geometry::procedural::icosphere(0);
+    for encoding in [
+        io::PlyEncoding::Ascii,
+        io::PlyEncoding::BinaryLittleEndian,
+        io::PlyEncoding::BinaryBigEndian,
+    ] {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.ply");
+        io::write_ply_with(&path, &mesh, &[], encoding).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        // a trailing newline is not data
+        let mut newline = bytes.clone();
+        newline.extend_from_slice(b"\n");
+        assert_eq!(
+            io::read_mesh_from_bytes(&newline, MeshFormat::Ply).unwrap(),
+            mesh
+        );
+        // an extra face (the header says 4) is
+        let mut extra = bytes.clone();
+        extra.extend_from_slice(match encoding {
+            io::PlyEncoding::Ascii => b"3 0 1 2\n".as_slice(),
+            _ => &[3, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 2],
+        });
+        let e = io::read_mesh_from_bytes(&extra, MeshFormat::Ply).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("after the last element the header declares"),
+            "{encoding:?}: {e}"
+        );
+    }
+    let off = b"OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 3 1\n3 0 2 3\n3 1 3 2\n";
+    assert!(io::read_mesh_from_bytes(off, MeshFormat::Off).is_ok());
+    let mut extra = off.to_vec();
+    extra.extend_from_slice(b"# a comment is fine\n3 0 1 3\n");
+    let e = io::read_mesh_from_bytes(&extra, MeshFormat::Off).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("line 12: found `3` after the 4 vertices and 4 faces"),
+        "{e}"
+    );
+}
+
+#[test]
+fn an_obj_that_is_not_text_says_so() {
+    let noise: Vec<u8> = (0..5000u32)
+        .map(|i| (i.wrapping_mul(2654435761) >> 11) as u8)
+        .collect();
+    let e = io::read_mesh_from_bytes(&noise, MeshFormat::Obj).unwrap_err();
+    assert!(e.to_string().contains("not an OBJ file"), "{e}");
+    let e = io::read_mesh_from_bytes(b"hello world\nthis is prose\n", MeshFormat::Obj).unwrap_err();
+    assert!(e.to_string().contains("line 1: not an OBJ file"), "{e}");
+    // comments and groups before the first vertex are OBJ
+    let ok = b"# made by hand\nmtllib a.mtl\no thing\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    assert_eq!(
+        io::read_mesh_from_bytes(ok, MeshFormat::Obj)
+            .unwrap()
+            .num_faces(),
+        1
+    );
+}

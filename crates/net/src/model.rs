@@ -696,31 +696,40 @@ impl PoissonNet {
                 path.display()
             )));
         }
-        let io = |source| NetError::Io {
-            path: path.to_path_buf(),
-            source,
+        let refused = |e: mfm_files::FileError| match e {
+            mfm_files::FileError::Io { path, source } => NetError::Io { path, source },
+            other => NetError::Io {
+                path: path.to_path_buf(),
+                source: std::io::Error::other(other.to_string()),
+            },
         };
-        let stem = path
+        // libtorch writes the weights to a path of its own: a temporary file
+        // beside the (link-resolved) target, renamed over it once complete.
+        let target = mfm_files::atomic::resolve_target(path).map_err(refused)?;
+        let stem = target
             .file_stem()
             .and_then(|s| s.to_str())
             .unwrap_or("weights");
-        let tmp = path.with_file_name(format!(".{stem}.tmp-{}.safetensors", std::process::id()));
-        self.vs.save(&tmp)?;
-        std::fs::rename(&tmp, path).map_err(io)?;
+        let tmp = target.with_file_name(format!(".{stem}.tmp-{}.safetensors", std::process::id()));
+        let saved = self.vs.save(&tmp).map_err(NetError::from).and_then(|()| {
+            std::fs::File::open(&tmp)
+                .and_then(|f| f.sync_all())
+                .and_then(|()| std::fs::rename(&tmp, &target))
+                .map_err(|source| NetError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                })
+        });
+        if let Err(e) = saved {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(e);
+        }
         let cfg_path = Self::config_path(path);
         let json = serde_json::to_string_pretty(&self.config).map_err(|source| NetError::Json {
             path: cfg_path.clone(),
             source,
         })?;
-        let tmp = cfg_path.with_file_name(format!(".{stem}.tmp-{}.json", std::process::id()));
-        std::fs::write(&tmp, json).map_err(|source| NetError::Io {
-            path: tmp.clone(),
-            source,
-        })?;
-        std::fs::rename(&tmp, &cfg_path).map_err(|source| NetError::Io {
-            path: cfg_path,
-            source,
-        })
+        mfm_files::write_atomic(&cfg_path, |w| w.write_all(json.as_bytes())).map_err(refused)
     }
 
     /// Reads the configuration written next to `weights` by [`PoissonNet::save`].

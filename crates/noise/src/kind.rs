@@ -3,6 +3,7 @@
 use std::fmt;
 use std::str::FromStr;
 
+use mfm_geometry::io::fmt_f64;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{NoiseError, Result};
@@ -102,7 +103,7 @@ impl NoiseKind {
             Err(NoiseError::InvalidParameter {
                 name,
                 expected,
-                found: v.to_string(),
+                found: fmt_f64(v),
             })
         };
         match *self {
@@ -143,9 +144,9 @@ impl fmt::Display for NoiseKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Naive | Self::White => f.write_str(self.name()),
-            Self::Matern { tau } => write!(f, "matern:{tau}"),
-            Self::MaternNormalized { c } => write!(f, "matern-normalized:{c}"),
-            Self::Explicit { k, tau } => write!(f, "explicit:{k}:{tau}"),
+            Self::Matern { tau } => write!(f, "matern:{}", fmt_f64(*tau)),
+            Self::MaternNormalized { c } => write!(f, "matern-normalized:{}", fmt_f64(*c)),
+            Self::Explicit { k, tau } => write!(f, "explicit:{k}:{}", fmt_f64(*tau)),
         }
     }
 }

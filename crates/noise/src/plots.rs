@@ -367,16 +367,7 @@ fn write_png(path: &Path, buf: &[u8], w: u32, h: u32) -> Result<()> {
         image::ImageFormat::Png,
     )
     .map_err(|e| fail(format!("PNG encoding failed: {e}")))?;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "plot".into());
-    let tmp = path.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
-    std::fs::write(&tmp, &bytes).map_err(|e| fail(e.to_string()))?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        fail(e.to_string())
-    })
+    mfm_files::write_atomic(path, |w| w.write_all(&bytes)).map_err(|e| fail(e.to_string()))
 }
 
 /// A plotters backend on an RGB8 buffer whose text is drawn with the

@@ -60,6 +60,7 @@
 use faer::MatMut;
 use faer::sparse::SparseColMat;
 use mfm_geometry::TriMesh;
+use mfm_geometry::io::fmt_f64;
 use mfm_geometry::operators::{Operators, try_gamma};
 use mfm_solver::{EigenOptions, Eigenpairs, ScreenedPoisson, generalized_eigenpairs};
 use rayon::prelude::*;
@@ -459,6 +460,19 @@ impl NoiseSampler {
                         null_space: Some(Components::new(l, mass)),
                     },
                 )
+            }
+            NoiseKind::Matern { tau } if tau < ZERO_TAU_REGULARIZATION * gamma => {
+                return Err(NoiseError::InvalidParameter {
+                    name: "tau",
+                    expected: "0 (no screening) or at least 1e-10 x Gamma, the smallest \
+                               screening whose factorization is reliable",
+                    found: format!(
+                        "{}, below 1e-10 x Gamma = {} on this mesh (Gamma = {})",
+                        fmt_f64(tau),
+                        fmt_f64(ZERO_TAU_REGULARIZATION * gamma),
+                        fmt_f64(gamma)
+                    ),
+                });
             }
             NoiseKind::Matern { tau } => (
                 Some(tau),

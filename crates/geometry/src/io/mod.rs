@@ -388,6 +388,10 @@ pub enum WriteErrorKind {
     /// Creating, writing, syncing or renaming the file failed.
     #[error("{0}")]
     Io(std::io::Error),
+    /// The path names something that must not be replaced (a folder, a
+    /// device, a FIFO).
+    #[error("{0}")]
+    Refused(String),
     /// A scalar property name is not usable in a PLY header.
     #[error("scalar property name {name:?} is invalid: {reason}")]
     InvalidScalarName {
@@ -420,8 +424,7 @@ pub enum WriteErrorKind {
 /// into place; the destination is then unchanged.
 pub fn write_obj(path: impl AsRef<Path>, mesh: &TriMesh) -> Result<(), WriteError> {
     let path = path.as_ref();
-    write_atomically(path, |w| obj::write(w, mesh))
-        .map_err(|e| WriteError::new(path, WriteErrorKind::Io(e)))
+    write_atomically(path, |mut w| obj::write(&mut w, mesh)).map_err(|k| WriteError::new(path, k))
 }
 
 /// Writes `mesh` as binary little-endian PLY with `double` coordinates, a
@@ -462,65 +465,36 @@ pub fn write_ply_with(
 ) -> Result<(), WriteError> {
     let path = path.as_ref();
     ply::check_scalars(mesh, scalars).map_err(|k| WriteError::new(path, k))?;
-    write_atomically(path, |w| ply::write(w, mesh, scalars, encoding))
-        .map_err(|e| WriteError::new(path, WriteErrorKind::Io(e)))
+    write_atomically(path, |mut w| ply::write(&mut w, mesh, scalars, encoding))
+        .map_err(|k| WriteError::new(path, k))
 }
 
-/// Writes through `body` into a fresh temporary file next to `path`, then
-/// renames it over `path`. On any failure the temporary file is removed and
-/// `path` is left as it was.
+/// Writes through `body` with [`mfm_files::write_atomic`]: a temporary
+/// file next to `path`, synced and renamed over it; on any failure `path` is
+/// left as it was. Folders, devices and FIFOs at `path` are refused; a
+/// symbolic link is followed.
 fn write_atomically(
     path: &Path,
-    body: impl FnOnce(&mut std::io::BufWriter<&std::fs::File>) -> std::io::Result<()>,
-) -> std::io::Result<()> {
-    use std::sync::atomic::{AtomicU64, Ordering};
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
-
-    let file_name = path.file_name().ok_or_else(|| {
-        std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            "the path does not name a file",
-        )
-    })?;
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let (tmp_path, file) = loop {
-        let n = COUNTER.fetch_add(1, Ordering::Relaxed);
-        let mut name = std::ffi::OsString::from(".");
-        name.push(file_name);
-        name.push(format!(".{}.{n}.tmp", std::process::id()));
-        let candidate = dir.join(name);
-        match std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&candidate)
-        {
-            Ok(f) => break (candidate, f),
-            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
-            Err(e) => return Err(e),
-        }
-    };
-    let result = (|| {
-        let mut w = std::io::BufWriter::new(&file);
-        body(&mut w)?;
-        w.flush()?;
-        drop(w);
-        file.sync_all()?;
-        std::fs::rename(&tmp_path, path)
-    })();
-    if result.is_err() {
-        // best effort: the original error is the one worth reporting
-        let _ = std::fs::remove_file(&tmp_path);
-    }
-    result
+    body: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<(), WriteErrorKind> {
+    mfm_files::write_atomic(path, body).map_err(|e| match e {
+        mfm_files::FileError::Io { source, .. } => WriteErrorKind::Io(source),
+        other => WriteErrorKind::Refused(other.to_string()),
+    })
 }
 
 /// Formats an `f64` with the shortest digits that parse back to the same
 /// value, in plain notation for moderate magnitudes and scientific notation
-/// otherwise (so `1e-300` does not become 300 zeros).
-pub(crate) fn fmt_f64(x: f64) -> String {
+/// otherwise (so `1e-300` does not become 300 zeros, nor `1e300` 300
+/// digits). Used for every number mfm writes as text or shows in a message.
+///
+/// ```
+/// use mfm_geometry::io::fmt_f64;
+/// assert_eq!(fmt_f64(0.25), "0.25");
+/// assert_eq!(fmt_f64(1e300), "1e300");
+/// assert_eq!(fmt_f64(-1e-15), "-1e-15");
+/// ```
+pub fn fmt_f64(x: f64) -> String {
     let a = x.abs();
     if a == 0.0 || (1e-5..1e16).contains(&a) || !x.is_finite() {
         format!("{x}")

@@ -48,7 +48,97 @@ use crate::mesh::{MeshError, TriMesh};
 use std::io::{BufRead, Read, Write};
 use std::ops::Range;
 
+/// Bytes looked at to decide whether a file is OBJ text at all.
+const SNIFF_BYTES: usize = 1 << 20;
+
+/// Statement keywords of OBJ (geometry, grouping, display and free-form).
+const KEYWORDS: &[&[u8]] = &[
+    b"v",
+    b"vt",
+    b"vn",
+    b"vp",
+    b"f",
+    b"l",
+    b"p",
+    b"o",
+    b"g",
+    b"s",
+    b"mg",
+    b"usemtl",
+    b"mtllib",
+    b"usemap",
+    b"maplib",
+    b"cstype",
+    b"deg",
+    b"bmat",
+    b"step",
+    b"curv",
+    b"curv2",
+    b"surf",
+    b"parm",
+    b"trim",
+    b"hole",
+    b"scrv",
+    b"sp",
+    b"end",
+    b"con",
+    b"lod",
+    b"bevel",
+    b"c_interp",
+    b"d_interp",
+    b"shadow_obj",
+    b"trace_obj",
+    b"ctech",
+    b"stech",
+    b"call",
+    b"csh",
+];
+
+/// Refuses a file that is not OBJ text: one whose first [`SNIFF_BYTES`]
+/// hold no `v` or `f` statement and either a NUL byte or a line that starts
+/// with something other than an OBJ keyword or a comment.
+fn sniff(bytes: &[u8]) -> Result<(), ReadErrorKind> {
+    let head = &bytes[..bytes.len().min(SNIFF_BYTES)];
+    let mut foreign = None;
+    for (n, line) in head.split(|&b| b == b'\n').enumerate() {
+        let first = line
+            .split(|b| b.is_ascii_whitespace())
+            .find(|t| !t.is_empty())
+            .unwrap_or_default();
+        if first == b"v" || first == b"f" {
+            return Ok(());
+        }
+        if foreign.is_none()
+            && !first.is_empty()
+            && !first.starts_with(b"#")
+            && !first.starts_with(b"\\")
+            && !KEYWORDS.contains(&first)
+        {
+            foreign = Some(n + 1);
+        }
+    }
+    let binary = head.contains(&0);
+    match (binary, foreign) {
+        (false, None) => Ok(()),
+        (true, _) => Err(ReadErrorKind::Syntax {
+            line: 1,
+            message: format!(
+                "not an OBJ file: binary data and no `v` or `f` statement in the first {} bytes",
+                head.len()
+            ),
+        }),
+        (false, Some(line)) => Err(ReadErrorKind::Syntax {
+            line,
+            message: format!(
+                "not an OBJ file: no `v` or `f` statement in the first {} bytes, and this line starts with no OBJ keyword",
+                head.len()
+            ),
+        }),
+    }
+}
+
 pub(crate) fn parse(bytes: &[u8]) -> Result<Parsed, ReadErrorKind> {
+    sniff(bytes)?;
     let prepared = Prepared::new(bytes)?;
     let text = prepared.tobj_text();
     let mut reader = CountingReader {

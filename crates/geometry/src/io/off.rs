@@ -5,7 +5,8 @@
 //! or the next one), `V` vertex lines whose first three numbers are `x y z`,
 //! then `F` face lines `n i_1 ... i_n [color...]` with 0-based indices.
 //! `#` starts a comment; blank lines are skipped. Each vertex and each face
-//! must be on one line. 4D/nD and binary OFF are rejected.
+//! must be on one line; anything after the declared faces is an error (the
+//! counts would be wrong). 4D/nD and binary OFF are rejected.
 
 use super::text::{lines, parse_token, show, strip_comment, tokens};
 use super::{Parsed, ReadErrorKind, push_fan};
@@ -128,6 +129,15 @@ pub(crate) fn parse(bytes: &[u8]) -> Result<Parsed, ReadErrorKind> {
             corners.push(index);
         }
         push_fan(&mut out.faces, &corners);
+    }
+    if let Some((l, text)) = content.next() {
+        return Err(ReadErrorKind::Syntax {
+            line: l,
+            message: format!(
+                "found {} after the {nv} vertices and {nf} faces the header declares (wrong counts in the header?)",
+                show(tokens(text).next().unwrap_or_default())
+            ),
+        });
     }
     Ok(out)
 }

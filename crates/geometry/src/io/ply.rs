@@ -269,6 +269,9 @@ trait Source {
     fn skip(&mut self, ty: Scalar, n: u64, what: &dyn Fn() -> String) -> Result<(), ReadErrorKind>;
     /// An error at the current position.
     fn error(&self, message: String) -> ReadErrorKind;
+    /// What follows the last element, if anything but whitespace: the error
+    /// to report.
+    fn leftover(&mut self) -> Option<ReadErrorKind>;
 }
 
 struct Ascii<'a> {
@@ -345,6 +348,17 @@ impl Source for Ascii<'_> {
 
     fn error(&self, message: String) -> ReadErrorKind {
         syntax(self.line, message)
+    }
+
+    fn leftover(&mut self) -> Option<ReadErrorKind> {
+        let (line, token) = self.tokens.next()?;
+        Some(syntax(
+            line,
+            format!(
+                "found {} after the last element the header declares (wrong counts in the header?)",
+                show(token)
+            ),
+        ))
     }
 }
 
@@ -438,6 +452,18 @@ impl Source for Binary<'_> {
             offset: self.pos,
             message,
         }
+    }
+
+    fn leftover(&mut self) -> Option<ReadErrorKind> {
+        let rest = self.bytes.get(self.pos..).unwrap_or_default();
+        // a trailing newline some writers add is not data
+        if rest.iter().all(u8::is_ascii_whitespace) {
+            return None;
+        }
+        Some(self.error(format!(
+            "{} bytes after the last element the header declares (wrong counts in the header?)",
+            rest.len()
+        )))
     }
 }
 
@@ -618,6 +644,9 @@ fn read_body(
                 out.positions.push(p);
             }
         }
+    }
+    if let Some(e) = src.leftover() {
+        return Err(e);
     }
     Ok(out)
 }

@@ -57,10 +57,7 @@ mod grid;
 mod raster;
 mod text;
 
-use std::fs::File;
-use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use image::{ImageEncoder, Rgb, RgbImage};
 use thiserror::Error;
@@ -140,6 +137,10 @@ pub enum RenderError {
         #[source]
         source: std::io::Error,
     },
+    /// The path names something that must not be replaced (a folder, a
+    /// device, a FIFO).
+    #[error("could not write PNG: {0}")]
+    Refused(String),
     /// PNG encoding failed.
     #[error("could not encode PNG {}: {source}", path.display())]
     Encode {
@@ -423,53 +424,28 @@ fn render_with(
 /// Writes `img` as a PNG at `path`, atomically: the data goes to a
 /// temporary file in the same directory which is then renamed over `path`,
 /// so readers never see a half-written picture. The directory must exist.
+/// A folder, device or FIFO at `path` is refused, a symbolic link followed
+/// ([`mfm_files::atomic`]).
 ///
 /// # Errors
-/// [`RenderError::Io`] or [`RenderError::Encode`], naming `path`.
+/// [`RenderError::Io`], [`RenderError::Refused`] or [`RenderError::Encode`],
+/// naming `path`.
 pub fn save_png(img: &RgbImage, path: impl AsRef<Path>) -> Result<(), RenderError> {
-    static COUNTER: AtomicU64 = AtomicU64::new(0);
     let path = path.as_ref();
-    let io_err = |source| RenderError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let Some(name) = path.file_name() else {
-        return Err(io_err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            "expected a file path, found a path without a file name",
-        )));
-    };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    let tmp = dir.join(format!(
-        ".{}.tmp-{}-{}",
-        name.to_string_lossy(),
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let result = (|| {
-        let file = File::create(&tmp).map_err(io_err)?;
-        let mut writer = BufWriter::new(file);
-        image::codecs::png::PngEncoder::new(&mut writer)
-            .write_image(
-                img.as_raw(),
-                img.width(),
-                img.height(),
-                image::ExtendedColorType::Rgb8,
-            )
-            .map_err(|source| RenderError::Encode {
-                path: path.to_path_buf(),
-                source,
-            })?;
-        writer.flush().map_err(io_err)?;
-        let file = writer.into_inner().map_err(|e| io_err(e.into_error()))?;
-        file.sync_all().map_err(io_err)?;
-        std::fs::rename(&tmp, path).map_err(io_err)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    let mut bytes = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut bytes)
+        .write_image(
+            img.as_raw(),
+            img.width(),
+            img.height(),
+            image::ExtendedColorType::Rgb8,
+        )
+        .map_err(|source| RenderError::Encode {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    mfm_files::write_atomic(path, |w| w.write_all(&bytes)).map_err(|e| match e {
+        mfm_files::FileError::Io { path, source } => RenderError::Io { path, source },
+        other => RenderError::Refused(other.to_string()),
+    })
 }

@@ -1,0 +1,651 @@
+//! What `mfm` refuses to overwrite, how it survives signals and damaged
+//! files, and how it fails on bad input: each check drives the real binary.
+#![allow(clippy::unwrap_used)]
+
+use std::fs;
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn mfm_in(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mfm"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("the mfm binary runs")
+}
+
+fn err(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Runs and expects failure with `needle` in the one-line error.
+#[track_caller]
+fn refused(dir: &Path, args: &[&str], needle: &str) -> String {
+    let o = mfm_in(dir, args);
+    assert!(!o.status.success(), "{args:?} succeeded: {}", err(&o));
+    let e = err(&o);
+    assert!(e.contains(needle), "{args:?}: expected `{needle}` in: {e}");
+    e
+}
+
+#[track_caller]
+fn ok(dir: &Path, args: &[&str]) -> Output {
+    let o = mfm_in(dir, args);
+    assert!(o.status.success(), "{args:?}: {}", err(&o));
+    o
+}
+
+fn tmp_files(dir: &Path) -> Vec<String> {
+    let mut found = Vec::new();
+    for e in walk(dir) {
+        let name = e.file_name().unwrap().to_string_lossy().into_owned();
+        if name.contains(".tmp") {
+            found.push(e.display().to_string());
+        }
+    }
+    found
+}
+
+fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for e in fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.extend(walk(&p));
+        }
+        out.push(p);
+    }
+    out
+}
+
+#[test]
+fn outputs_never_replace_inputs_devices_or_each_other() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    ok(d, &["convert", "builtin:icosphere:1", "ico.ply"]);
+    let mesh = fs::read(d.join("ico.ply")).unwrap();
+    refused(
+        d,
+        &["noise", "ico.ply", "--out", "ico.ply"],
+        "is also an input",
+    );
+    refused(
+        d,
+        &["noise", "ico.ply", "--out", "./ico.ply"],
+        "is also an input",
+    );
+    refused(
+        d,
+        &["render", "ico.ply", "--out", "ico.ply"],
+        "is also an input",
+    );
+    refused(
+        d,
+        &["noise", "ico.ply", "--out", "n.npy", "--png", "ico.ply"],
+        "is also an input",
+    );
+    refused(d, &["convert", "ico.ply", "ico.ply"], "is also an input");
+    refused(
+        d,
+        &["noise", "ico.ply", "--out", "x.json"],
+        "give --out a .npy name",
+    );
+    refused(
+        d,
+        &["noise", "ico.ply", "--out", "n.npy", "--png", "n.npy"],
+        "are the same file",
+    );
+    assert_eq!(fs::read(d.join("ico.ply")).unwrap(), mesh);
+    // a device node stays a device node
+    refused(
+        d,
+        &["noise", "ico.ply", "--out", "/dev/null"],
+        "is a device",
+    );
+    use std::os::unix::fs::FileTypeExt;
+    assert!(
+        fs::metadata("/dev/null")
+            .unwrap()
+            .file_type()
+            .is_char_device()
+    );
+    // a folder is not replaced by a file
+    fs::create_dir(d.join("folder.npy")).unwrap();
+    refused(
+        d,
+        &["noise", "ico.ply", "--out", "folder.npy"],
+        "is a folder",
+    );
+    assert!(d.join("folder.npy").is_dir());
+    // a symlink: its target is written, the link stays
+    fs::write(d.join("target.npy"), "old").unwrap();
+    std::os::unix::fs::symlink("target.npy", d.join("link.npy")).unwrap();
+    ok(d, &["noise", "ico.ply", "--out", "link.npy"]);
+    assert!(
+        fs::symlink_metadata(d.join("link.npy"))
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    assert!(
+        fs::read(d.join("target.npy"))
+            .unwrap()
+            .starts_with(b"\x93NUMPY")
+    );
+    // eval: the samples and the reference dataset are inputs
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "data",
+            "--n",
+            "3",
+            "--reference",
+            "3",
+        ],
+    );
+    let ref_mesh = fs::read(d.join("data/reference/mesh.ply")).unwrap();
+    let samples = d.join("data/train/signals.npy").display().to_string();
+    refused(
+        d,
+        &[
+            "eval",
+            "--samples",
+            &samples,
+            "--reference",
+            "data/reference",
+            "--out",
+            &samples,
+        ],
+        "is also an input",
+    );
+    refused(
+        d,
+        &[
+            "eval",
+            "--samples",
+            &samples,
+            "--reference",
+            "data/reference",
+            "--png",
+            "data/reference/mesh.ply",
+        ],
+        "inside the input folder",
+    );
+    assert_eq!(
+        fs::read(d.join("data/reference/mesh.ply")).unwrap(),
+        ref_mesh
+    );
+    assert!(tmp_files(d).is_empty(), "{:?}", tmp_files(d));
+}
+
+#[test]
+fn bad_files_and_values_are_refused_by_name() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    // header counts are enforced
+    fs::write(
+        d.join("extra.off"),
+        "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 2 1\n",
+    )
+    .unwrap();
+    refused(
+        d,
+        &["info", "extra.off"],
+        "extra.off`: line 7: found `3` after the 3 vertices and 1 faces",
+    );
+    let ply = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n\
+0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n3 0 2 1\n3 0 1 2\n3 1 2 0\n";
+    fs::write(d.join("four.ply"), ply).unwrap();
+    refused(
+        d,
+        &["info", "four.ply"],
+        "after the last element the header declares",
+    );
+    let garbage: Vec<u8> = (0..4000u32)
+        .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
+        .collect();
+    fs::write(d.join("garbage.obj"), garbage).unwrap();
+    refused(d, &["info", "garbage.obj"], "not an OBJ file");
+    // control bytes from a file are shown escaped, never sent to the terminal
+    fs::write(
+        d.join("esc.off"),
+        b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 \x1b[2J\x07\n",
+    )
+    .unwrap();
+    let e = refused(d, &["info", "esc.off"], "esc.off");
+    assert!(!e.chars().any(|c| c.is_control() && c != '\n'), "{e:?}");
+    assert!(e.contains("\\u{1b}[2J"), "{e}");
+    // duplicate faces: `info` flags them and every computing command refuses
+    fs::write(
+        d.join("dup.off"),
+        "OFF\n4 3 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 2 3\n3 2 1 0\n",
+    )
+    .unwrap();
+    let info = ok(d, &["info", "dup.off"]);
+    assert!(String::from_utf8_lossy(&info.stdout).contains("duplicate face"));
+    for args in [
+        &["noise", "dup.off", "--out", "n.npy"][..],
+        &["operators", "dup.off", "--out", "ops"],
+        &["eigs", "dup.off", "--k", "2", "--out", "eigs"],
+    ] {
+        refused(d, args, "dup.off: 1 duplicate face");
+    }
+    assert!(!d.join("ops").exists() && !d.join("eigs").exists() && !d.join("n.npy").exists());
+    // non-manifold edges: a warning, the same one from every command
+    fs::write(
+        d.join("fin.off"),
+        "OFF\n5 3 0\n0 0 0\n1 0 0\n0 1 0\n0 -1 0\n0 0 1\n3 0 1 2\n3 1 0 3\n3 0 1 4\n",
+    )
+    .unwrap();
+    for args in [
+        &["noise", "fin.off", "--out", "f.npy"][..],
+        &["operators", "fin.off", "--out", "fops"],
+    ] {
+        let o = ok(d, args);
+        assert!(
+            err(&o).contains("warning: fin.off: 1 non-manifold edge"),
+            "{}",
+            err(&o)
+        );
+    }
+    // numbers: negative values reach the command, which names the flag
+    ok(d, &["convert", "builtin:icosphere:1", "ico.ply"]);
+    refused(
+        d,
+        &["noise", "ico.ply", "--tau", "-1", "--out", "t.npy"],
+        "invalid parameter tau",
+    );
+    refused(
+        d,
+        &["noise", "ico.ply", "--tau", "1e-15", "--out", "t.npy"],
+        "at least 1e-10 x Gamma",
+    );
+    ok(d, &["noise", "ico.ply", "--tau", "0", "--out", "t0.npy"]);
+    let o = ok(d, &["noise", "ico.ply", "--tau", "1e300", "--out", "t.npy"]);
+    let line = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(line.contains("matern:1e300") && line.len() < 400, "{line}");
+    // npy files: truncated and wrong shapes name the file
+    let bytes = fs::read(d.join("t.npy")).unwrap();
+    fs::write(d.join("trunc.npy"), &bytes[..bytes.len() - 3]).unwrap();
+    refused(
+        d,
+        &[
+            "render",
+            "ico.ply",
+            "--scalars",
+            "trunc.npy",
+            "--out",
+            "r.png",
+        ],
+        "trunc.npy: truncated",
+    );
+    assert!(!d.join("r.png").exists());
+    // a dataset with a NaN is refused, naming file, signal and vertex
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "data",
+            "--n",
+            "3",
+            "--reference",
+            "2",
+        ],
+    );
+    let signals = d.join("data/train/signals.npy");
+    let mut raw = fs::read(&signals).unwrap();
+    let at = raw.len() - 4 * 7;
+    raw[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+    fs::write(&signals, &raw).unwrap();
+    refused(
+        d,
+        &[
+            "train",
+            "--preset",
+            "cpu",
+            "--dataset",
+            "data/train",
+            "--out",
+            "run",
+            "--steps",
+            "2",
+            "--quiet",
+        ],
+        "signal 2, vertex",
+    );
+    // ...and the failed start leaves no run folder behind
+    assert!(!d.join("run").exists());
+    // an eval of NaN samples is an error naming the file and the sample
+    refused(
+        d,
+        &[
+            "eval",
+            "--samples",
+            "data/train/signals.npy",
+            "--reference",
+            "data/reference",
+        ],
+        "signals.npy: sample 2 is not finite",
+    );
+    // samples with other channels than the reference name both
+    ok(
+        d,
+        &[
+            "noise",
+            "data/reference/mesh.ply",
+            "--channels",
+            "2",
+            "--out",
+            "two.npy",
+        ],
+    );
+    refused(
+        d,
+        &[
+            "eval",
+            "--samples",
+            "two.npy",
+            "--reference",
+            "data/reference",
+        ],
+        "two.npy: samples have 2 channels but the reference set data/reference has 1",
+    );
+    // an output larger than the disk is refused before anything is written
+    refused(
+        d,
+        &[
+            "noise",
+            "ico.ply",
+            "--samples",
+            "100000000000",
+            "--out",
+            "big.npy",
+        ],
+        "free there",
+    );
+    assert!(!d.join("big.npy").exists() && !d.join("big.json").exists());
+    // messages for paths that are not what they should be
+    refused(
+        d,
+        &[
+            "sample", "--run", "nowhere", "--mesh", "ico.ply", "--out", "s",
+        ],
+        "nowhere: no such run folder",
+    );
+    refused(
+        d,
+        &[
+            "train",
+            "--preset",
+            "cpu",
+            "--dataset",
+            "t.npy",
+            "--out",
+            "run2",
+        ],
+        "is a file, not a dataset folder",
+    );
+    assert!(!d.join("s").exists() && !d.join("run2").exists());
+    assert!(tmp_files(d).is_empty(), "{:?}", tmp_files(d));
+}
+
+/// The tiny run every training check below starts from.
+const TINY: &str = "[model]\npreset = \"small\"\nwidth = 8\nblocks = 1\nvector_layers = 1\n\
+[train]\nsteps = 4\nbatch = 2\ncheckpoint_every = 2\nlog_every = 1\n[sample]\nsteps = 2\n";
+
+#[test]
+fn runs_survive_signals_edits_moves_and_damage() {
+    let root = tempfile::tempdir().unwrap();
+    let d = &root.path().join("project");
+    fs::create_dir(d).unwrap();
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "data",
+            "--n",
+            "6",
+            "--reference",
+            "4",
+        ],
+    );
+    fs::write(d.join("run.toml"), TINY).unwrap();
+    ok(
+        d,
+        &[
+            "train",
+            "--config",
+            "run.toml",
+            "--dataset",
+            "data/train",
+            "--out",
+            "run",
+            "--quiet",
+        ],
+    );
+    // the dataset path is stored absolute
+    let config = fs::read_to_string(d.join("run/config.toml")).unwrap();
+    let stored = d.join("data/train").canonicalize().unwrap();
+    assert!(
+        config.contains(&format!("path = \"{}\"", stored.display())),
+        "{config}"
+    );
+
+    // sample: a non-empty folder is refused; --force replaces only what
+    // sample writes, stale PLYs of an earlier run included
+    ok(
+        d,
+        &[
+            "sample",
+            "--run",
+            "run",
+            "--mesh",
+            "data/reference/mesh.ply",
+            "--n",
+            "3",
+            "--ply",
+            "3",
+            "--out",
+            "s",
+        ],
+    );
+    fs::write(d.join("s/notes.txt"), "mine").unwrap();
+    let before = fs::read(d.join("s/samples.npy")).unwrap();
+    refused(
+        d,
+        &[
+            "sample",
+            "--run",
+            "run",
+            "--mesh",
+            "data/reference/mesh.ply",
+            "--n",
+            "2",
+            "--ply",
+            "1",
+            "--out",
+            "s",
+        ],
+        "--force",
+    );
+    assert_eq!(fs::read(d.join("s/samples.npy")).unwrap(), before);
+    ok(
+        d,
+        &[
+            "sample",
+            "--run",
+            "run",
+            "--mesh",
+            "data/reference/mesh.ply",
+            "--n",
+            "2",
+            "--ply",
+            "1",
+            "--out",
+            "s",
+            "--force",
+        ],
+    );
+    assert!(d.join("s/sample_000.ply").is_file());
+    assert!(!d.join("s/sample_001.ply").exists() && !d.join("s/sample_002.ply").exists());
+    assert_eq!(fs::read_to_string(d.join("s/notes.txt")).unwrap(), "mine");
+    // more samples than the disk holds: refused up front, nothing written
+    refused(
+        d,
+        &[
+            "sample",
+            "--run",
+            "run",
+            "--mesh",
+            "data/reference/mesh.ply",
+            "--n",
+            "100000000000",
+            "--out",
+            "huge",
+        ],
+        "free there",
+    );
+    assert!(!d.join("huge").exists());
+    // a sample into the run folder's own files is refused
+    refused(
+        d,
+        &[
+            "sample",
+            "--run",
+            "run",
+            "--mesh",
+            "data/reference/mesh.ply",
+            "--out",
+            "run/checkpoints",
+            "--force",
+        ],
+        "inside the input folder",
+    );
+
+    // the final model is checksummed: a flipped byte is named
+    let weights = d.join("run/model.safetensors");
+    let good = fs::read(&weights).unwrap();
+    let mut bad = good.clone();
+    let k = bad.len() - 10;
+    bad[k] ^= 0x40;
+    fs::write(&weights, &bad).unwrap();
+    refused(
+        d,
+        &[
+            "sample",
+            "--run",
+            "run",
+            "--mesh",
+            "data/reference/mesh.ply",
+            "--out",
+            "s2",
+        ],
+        "model.safetensors: the final model file is corrupted",
+    );
+    assert!(!d.join("s2").exists());
+    fs::write(&weights, &good).unwrap();
+
+    // an edited config.toml: a model change is refused by name, a longer run accepted
+    let original = fs::read_to_string(d.join("run/config.toml")).unwrap();
+    fs::write(
+        d.join("run/config.toml"),
+        original.replace("width = 8", "width = 16"),
+    )
+    .unwrap();
+    refused(
+        d,
+        &["train", "--out", "run", "--resume", "--quiet"],
+        "model.width 8 -> 16",
+    );
+    assert!(
+        fs::read_to_string(d.join("run/config.toml"))
+            .unwrap()
+            .contains("width = 16"),
+        "the edit is kept"
+    );
+    fs::write(
+        d.join("run/config.toml"),
+        original.replace("steps = 4", "steps = 6"),
+    )
+    .unwrap();
+    let o = ok(d, &["train", "--out", "run", "--resume", "--quiet"]);
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("steps 4..6"),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+
+    // moved: the project copied elsewhere resumes from any directory
+    let moved = root.path().join("moved");
+    fs::rename(d, &moved).unwrap();
+    let o = ok(
+        root.path(),
+        &[
+            "train",
+            "--out",
+            "moved/run",
+            "--resume",
+            "--steps",
+            "8",
+            "--quiet",
+        ],
+    );
+    assert!(
+        err(&o).contains("using") && err(&o).contains("moved/data/train"),
+        "{}",
+        err(&o)
+    );
+
+    // SIGTERM (kill, timeout, Slurm, docker stop) checkpoints like Ctrl-C
+    let long = TINY
+        .replace("steps = 4", "steps = 1000000")
+        .replace("checkpoint_every = 2", "checkpoint_every = 100000");
+    fs::write(moved.join("long.toml"), long).unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_mfm"))
+        .current_dir(&moved)
+        .args([
+            "train",
+            "--config",
+            "long.toml",
+            "--dataset",
+            "data/train",
+            "--out",
+            "long",
+            "--quiet",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let log = moved.join("long/train_log.csv");
+    let t0 = std::time::Instant::now();
+    while fs::read_to_string(&log).map_or(0, |l| l.lines().count()) < 3 {
+        assert!(t0.elapsed().as_secs() < 120, "training did not start");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(130), "{}", err(&o));
+    let checkpoints: Vec<_> = fs::read_dir(moved.join("long/checkpoints"))
+        .unwrap()
+        .collect();
+    assert_eq!(checkpoints.len(), 1, "one checkpoint written on SIGTERM");
+}

@@ -1,0 +1,101 @@
+//! The error type of this crate.
+
+use std::path::PathBuf;
+
+/// Why a file could not be read or written. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum FileError {
+    /// An operating-system error on `path`.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The output exists and is not a regular file.
+    #[error(
+        "{} is {kind}, not a regular file; mfm writes only regular files (nothing was written)",
+        path.display()
+    )]
+    NotRegular {
+        /// The output path as given.
+        path: PathBuf,
+        /// What it is: "a folder", "a device", "a FIFO", "a socket".
+        kind: &'static str,
+    },
+    /// An output is one of the command's inputs.
+    #[error(
+        "{}{} is also an input of this command; choose another output (nothing was written)",
+        output.display(),
+        if output == input { String::new() } else { format!(" (the same file as {})", input.display()) }
+    )]
+    OutputIsInput {
+        /// The output as given.
+        output: PathBuf,
+        /// The input as given.
+        input: PathBuf,
+    },
+    /// An output lies inside an input folder.
+    #[error(
+        "{} is inside the input folder {}; choose an output outside it (nothing was written)",
+        output.display(), input.display()
+    )]
+    OutputInsideInput {
+        /// The output as given.
+        output: PathBuf,
+        /// The input folder as given.
+        input: PathBuf,
+    },
+    /// Two outputs of one command are the same file.
+    #[error(
+        "{} and {} are the same file; give each output its own path (nothing was written)",
+        first.display(), second.display()
+    )]
+    SameOutput {
+        /// The first output as given.
+        first: PathBuf,
+        /// The second output as given.
+        second: PathBuf,
+    },
+    /// The output needs more space than its file system has free.
+    #[error(
+        "{}: the output needs {} but only {} are free there (nothing was written)",
+        path.display(), crate::space::human_bytes(*needed), crate::space::human_bytes(*available)
+    )]
+    NoSpace {
+        /// The output.
+        path: PathBuf,
+        /// Bytes the output needs.
+        needed: u64,
+        /// Bytes free on its file system.
+        available: u64,
+    },
+    /// A file's contents are not what was expected.
+    #[error("{}: {message}", path.display())]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, with numbers.
+        message: String,
+    },
+}
+
+impl FileError {
+    /// [`FileError::Io`] on `path`.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Self::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// [`FileError::Format`] on `path`.
+    pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
+        Self::Format {
+            path: path.into(),
+            message: message.into(),
+        }
+    }
+}

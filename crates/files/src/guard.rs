@@ -1,0 +1,169 @@
+//! The check a command runs before writing anything: outputs must not be
+//! inputs, lie inside input folders, collide with each other, or be
+//! something other than a regular file.
+//!
+//! Paths are compared by identity, not by spelling: an existing path is
+//! canonicalized (symbolic links, `..`, relative paths resolved) and, on
+//! Unix, also compared by device and inode (so a hard link to an input is
+//! caught); a path that does not exist yet is its nearest existing ancestor,
+//! canonicalized, joined with the rest.
+
+use crate::atomic::resolve_target;
+use crate::error::FileError;
+use std::fs;
+use std::path::{Component, Path, PathBuf};
+
+/// The inputs and outputs of one command; see the [module docs](self).
+///
+/// # Example
+/// ```
+/// let dir = tempfile::tempdir().unwrap();
+/// let mesh = dir.path().join("in.off");
+/// std::fs::write(&mesh, "OFF\n0 0 0\n").unwrap();
+/// let err = mfm_files::Outputs::new()
+///     .input(&mesh)
+///     .output(dir.path().join("./in.off"))
+///     .check()
+///     .unwrap_err();
+/// assert!(err.to_string().contains("is also an input"));
+/// assert!(mfm_files::Outputs::new().input(&mesh).output(dir.path().join("out.npy")).check().is_ok());
+/// ```
+#[derive(Clone, Debug, Default)]
+pub struct Outputs {
+    inputs: Vec<PathBuf>,
+    outputs: Vec<PathBuf>,
+}
+
+impl Outputs {
+    /// No inputs, no outputs.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Adds an input: a file, or a folder whose contents are inputs.
+    /// Built-in names that are not paths (`builtin:...`) may be passed; a
+    /// path that does not exist is not an input and is ignored.
+    pub fn input(mut self, path: impl AsRef<Path>) -> Self {
+        self.inputs.push(path.as_ref().to_path_buf());
+        self
+    }
+
+    /// Adds a file the command will write.
+    pub fn output(mut self, path: impl AsRef<Path>) -> Self {
+        self.outputs.push(path.as_ref().to_path_buf());
+        self
+    }
+
+    /// Checks every rule; the first broken one is the error.
+    ///
+    /// # Errors
+    /// [`FileError::NotRegular`], [`FileError::OutputIsInput`],
+    /// [`FileError::OutputInsideInput`] or [`FileError::SameOutput`], each
+    /// naming the paths as given.
+    pub fn check(&self) -> Result<(), FileError> {
+        let inputs: Vec<(&PathBuf, Identity)> = self
+            .inputs
+            .iter()
+            .filter(|p| p.exists())
+            .map(|p| (p, Identity::of(p)))
+            .collect();
+        let mut seen: Vec<(&PathBuf, Identity)> = Vec::new();
+        for out in &self.outputs {
+            resolve_target(out)?;
+            let id = Identity::of(out);
+            for (input, input_id) in &inputs {
+                if id.same_file(input_id) {
+                    return Err(FileError::OutputIsInput {
+                        output: out.clone(),
+                        input: (*input).clone(),
+                    });
+                }
+                if input_id.is_dir && id.path.starts_with(&input_id.path) {
+                    return Err(FileError::OutputInsideInput {
+                        output: out.clone(),
+                        input: (*input).clone(),
+                    });
+                }
+            }
+            if let Some((first, _)) = seen.iter().find(|(_, s)| s.same_file(&id)) {
+                return Err(FileError::SameOutput {
+                    first: (*first).clone(),
+                    second: out.clone(),
+                });
+            }
+            seen.push((out, id));
+        }
+        Ok(())
+    }
+}
+
+/// What a path refers to.
+#[derive(Clone, Debug)]
+struct Identity {
+    path: PathBuf,
+    is_dir: bool,
+    /// (device, inode) of an existing file.
+    inode: Option<(u64, u64)>,
+}
+
+impl Identity {
+    fn of(path: &Path) -> Self {
+        let meta = fs::metadata(path).ok();
+        Self {
+            path: absolute_resolved(path),
+            is_dir: meta.as_ref().is_some_and(fs::Metadata::is_dir),
+            inode: meta.as_ref().and_then(inode),
+        }
+    }
+
+    fn same_file(&self, other: &Self) -> bool {
+        match (self.inode, other.inode) {
+            (Some(a), Some(b)) => a == b,
+            _ => self.path == other.path,
+        }
+    }
+}
+
+#[cfg(unix)]
+fn inode(m: &fs::Metadata) -> Option<(u64, u64)> {
+    use std::os::unix::fs::MetadataExt;
+    Some((m.dev(), m.ino()))
+}
+
+#[cfg(not(unix))]
+fn inode(_: &fs::Metadata) -> Option<(u64, u64)> {
+    None
+}
+
+/// `path` absolute with links resolved as far as it exists, the rest
+/// normalized lexically.
+pub fn absolute_resolved(path: &Path) -> PathBuf {
+    if let Ok(p) = fs::canonicalize(path) {
+        return p;
+    }
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    let mut existing = absolute.as_path();
+    let mut rest: Vec<Component<'_>> = Vec::new();
+    loop {
+        if let Ok(base) = fs::canonicalize(existing) {
+            let mut out = base;
+            for c in rest.iter().rev() {
+                match c {
+                    Component::ParentDir => {
+                        out.pop();
+                    }
+                    Component::CurDir => {}
+                    other => out.push(other.as_os_str()),
+                }
+            }
+            return out;
+        }
+        match (existing.parent(), existing.components().next_back()) {
+            (Some(parent), Some(last)) => {
+                rest.push(last);
+                existing = parent;
+            }
+            _ => return absolute,
+        }
+    }
+}

@@ -1,0 +1,91 @@
+//! Removing what a failed command created, and only that.
+
+use crate::error::FileError;
+use std::fs;
+use std::path::{Path, PathBuf};
+
+/// Records the folders and files a command creates; unless
+/// [`Undo::keep`] is called, dropping it removes them again (newest first).
+/// Paths that existed before they were recorded are never removed.
+///
+/// # Example
+/// ```
+/// let dir = tempfile::tempdir().unwrap();
+/// let out = dir.path().join("run");
+/// {
+///     let mut undo = mfm_files::Undo::new();
+///     undo.create_dir_all(&out).unwrap();
+///     undo.file(out.join("config.toml"));
+///     std::fs::write(out.join("config.toml"), "x").unwrap();
+///     // the command fails here: `undo` is dropped without keep()
+/// }
+/// assert!(!out.exists());
+/// ```
+#[derive(Debug, Default)]
+#[must_use = "dropping an Undo removes what it recorded; call keep() on success"]
+pub struct Undo {
+    created: Vec<PathBuf>,
+    kept: bool,
+}
+
+impl Undo {
+    /// Nothing recorded.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Creates `dir` and its missing parents, recording the outermost folder
+    /// that did not exist.
+    ///
+    /// # Errors
+    /// [`FileError::Io`] naming the folder.
+    pub fn create_dir_all(&mut self, dir: &Path) -> Result<(), FileError> {
+        let mut first_missing = None;
+        let mut p = Some(dir);
+        while let Some(q) = p {
+            if q.as_os_str().is_empty() || q.exists() {
+                break;
+            }
+            first_missing = Some(q.to_path_buf());
+            p = q.parent();
+        }
+        fs::create_dir_all(dir).map_err(|e| FileError::io(dir, e))?;
+        if let Some(d) = first_missing {
+            self.created.push(d);
+        }
+        Ok(())
+    }
+
+    /// Records a file the command is about to create; a file that exists
+    /// already is not recorded (it is the user's).
+    pub fn file(&mut self, path: impl AsRef<Path>) {
+        let path = path.as_ref();
+        if fs::symlink_metadata(path).is_err() {
+            self.created.push(path.to_path_buf());
+        }
+    }
+
+    /// The command succeeded: keep everything.
+    pub fn keep(mut self) {
+        self.kept = true;
+    }
+}
+
+impl Drop for Undo {
+    fn drop(&mut self) {
+        if self.kept {
+            return;
+        }
+        for p in self.created.iter().rev() {
+            match fs::symlink_metadata(p) {
+                Ok(m) if m.is_dir() => {
+                    let _ = fs::remove_dir_all(p);
+                }
+                Ok(_) => {
+                    let _ = fs::remove_file(p);
+                }
+                Err(_) => {}
+            }
+        }
+    }
+}
