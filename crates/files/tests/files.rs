@@ -1,4 +1,5 @@
 //! Atomic writes, output checks, undo and `.npy` reading under hostile input.
+#![allow(clippy::unwrap_used)]
 
 use mfm_files::{FileError, Outputs, Undo, npy, write_atomic};
 use proptest::prelude::*;

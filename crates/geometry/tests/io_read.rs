@@ -1027,6 +1027,7 @@ fn readers_and_ply_writer_agree_with_libigl() {
 }
 
 #[test]
+#[allow(clippy::unwrap_used)]
 fn data_after_the_declared_elements_is_an_error() {
     let mesh = mfm_geometry::procedural::icosphere(0);
     for encoding in [
@@ -1071,6 +1072,7 @@ fn data_after_the_declared_elements_is_an_error() {
 }
 
 #[test]
+#[allow(clippy::unwrap_used)]
 fn an_obj_that_is_not_text_says_so() {
     let noise: Vec<u8> = (0..5000u32)
         .map(|i| (i.wrapping_mul(2654435761) >> 11) as u8)
