@@ -8,6 +8,10 @@ mod libtorch_link;
 
 fn main() {
     println!("cargo:rerun-if-env-changed=DEP_MFM_NET_LIBTORCH_LIB");
+    if std::env::var_os("CARGO_FEATURE_NETWORK").is_none() {
+        // built without the network: nothing links libtorch
+        return;
+    }
     println!("cargo:rerun-if-changed=../net/libtorch_link.rs");
     match std::env::var("DEP_MFM_NET_LIBTORCH_LIB") {
         Ok(lib) => libtorch_link::emit_link_args(&lib),

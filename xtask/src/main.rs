@@ -30,6 +30,7 @@ mod figures;
 mod figures_deform;
 mod figures_gmm;
 mod flow_steps;
+mod no_network;
 mod pyenv;
 mod visual_check;
 
@@ -49,7 +50,8 @@ struct Cli {
 enum Cmd {
     /// Create the Python/libtorch environment if missing and print its variables.
     Setup,
-    /// Set up, then run all tests of the workspace (extra args go to `cargo test`).
+    /// Set up, then run all tests of the workspace (extra args go to `cargo test`;
+    /// without them, also check that `mfm` builds and runs without libtorch).
     Test {
         /// Arguments passed through to `cargo test`.
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
@@ -211,7 +213,11 @@ fn main() -> Result<()> {
             run(cargo(&env)
                 .args(["test", "--workspace"])
                 .args(&args)
-                .env("MFM_REQUIRE_ORACLES", "1"))
+                .env("MFM_REQUIRE_ORACLES", "1"))?;
+            if args.is_empty() {
+                no_network::check()?;
+            }
+            Ok(())
         }
         Cmd::Lint => {
             let env = pyenv::ensure()?;

@@ -118,19 +118,31 @@ pub enum Command {
     },
     /// Generate a dataset of signals over a mesh.
     #[command(subcommand)]
-    Dataset(crate::flow::DatasetCommand),
+    Dataset(crate::dataset::DatasetCommand),
     /// Train a flow-matching model on a dataset (checkpoints, resumable;
     /// Ctrl-C writes a checkpoint).
+    #[cfg(feature = "network")]
     Train(crate::flow::TrainArgs),
+    /// Train a flow-matching model (needs the `network` feature).
+    #[cfg(not(feature = "network"))]
+    Train(crate::unavailable::Unavailable),
     /// Generate signals with a trained run on any triangulation of the
     /// training surface.
+    #[cfg(feature = "network")]
     Sample(crate::flow::SampleArgs),
+    /// Generate signals with a trained run (needs the `network` feature).
+    #[cfg(not(feature = "network"))]
+    Sample(crate::unavailable::Unavailable),
     /// Metrics of generated samples against a reference dataset: MMD, COV,
     /// 1-NNA, GMM test error.
-    Eval(crate::flow::EvalArgs),
+    Eval(crate::eval::EvalArgs),
     /// PoissonNet: layer tables of the presets and training-step benchmarks.
+    #[cfg(feature = "network")]
     #[command(subcommand)]
     Net(crate::net::NetCommand),
+    /// PoissonNet tables and benchmarks (needs the `network` feature).
+    #[cfg(not(feature = "network"))]
+    Net(crate::unavailable::Unavailable),
     /// Another triangulation of a mesh's surface: midpoint subdivision, and
     /// damage (holes, a partial cut, edge flips) that spares the handle
     /// regions of a deformation space.
@@ -192,11 +204,20 @@ pub fn run(cmd: Command) -> Result<()> {
             plots: plots.as_deref(),
             coefficients: &coefficients,
         }),
-        Command::Dataset(cmd) => crate::flow::dataset(cmd),
+        Command::Dataset(cmd) => crate::dataset::dataset(cmd),
+        #[cfg(feature = "network")]
         Command::Train(args) => crate::flow::train(args),
+        #[cfg(feature = "network")]
         Command::Sample(args) => crate::flow::sample(args),
-        Command::Eval(args) => crate::flow::eval(args),
+        #[cfg(feature = "network")]
         Command::Net(cmd) => crate::net::run(cmd),
+        #[cfg(not(feature = "network"))]
+        Command::Train(_) => crate::unavailable::fail("train"),
+        #[cfg(not(feature = "network"))]
+        Command::Sample(_) => crate::unavailable::fail("sample"),
+        #[cfg(not(feature = "network"))]
+        Command::Net(_) => crate::unavailable::fail("net"),
+        Command::Eval(args) => crate::eval::eval(args),
         Command::Remesh(args) => crate::remesh::run(args),
     }
 }

@@ -4,12 +4,19 @@
 //! failure ends with a non-zero exit status and a one-line reason on stderr.
 
 mod commands;
+mod dataset;
+mod eval;
+#[cfg(feature = "network")]
 mod flow;
 mod mesh_arg;
+#[cfg(feature = "network")]
 mod net;
 mod output;
+mod pictures;
 mod remesh;
 mod spectral;
+#[cfg(not(feature = "network"))]
+mod unavailable;
 
 use clap::Parser;
 
@@ -29,6 +36,7 @@ struct Cli {
 fn main() {
     // Keeps freed tensor memory for reuse (large speed-up for training on
     // glibc); harmless for the commands that do not use libtorch.
+    #[cfg(feature = "network")]
     mfm_net::runtime::tune_allocator();
     let cli = parse();
     if let Err(e) = commands::run(cli.command) {
@@ -99,7 +107,7 @@ mod tests {
     #[test]
     fn a_cause_already_in_its_wrapper_is_printed_once() {
         let io = std::io::Error::new(std::io::ErrorKind::NotFound, "No such file");
-        let e = anyhow::Error::new(mfm_fm::FmError::io("/d/manifest.json", io))
+        let e = anyhow::Error::new(mfm_data::DataError::io("/d/manifest.json", io))
             .context("loading the dataset");
         assert_eq!(
             one_line(&e),

@@ -4,7 +4,7 @@
 //! followed), so a failed run never leaves a half-written file where a good
 //! one was.
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use faer::sparse::SparseColMat;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -82,4 +82,17 @@ pub fn prepare_outputs(inputs: &[Option<&Path>], outputs: &[PathBuf]) -> Result<
         undo.file(out);
     }
     Ok(undo)
+}
+
+/// Refuses a non-empty folder `dir` (a missing or empty one is fine).
+pub fn ensure_empty(dir: &Path) -> Result<()> {
+    if let Ok(mut entries) = std::fs::read_dir(dir)
+        && entries.next().is_some()
+    {
+        bail!(
+            "{} exists and is not empty; choose another --out (nothing was overwritten)",
+            dir.display()
+        );
+    }
+    Ok(())
 }

@@ -3,8 +3,8 @@
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
+use mfm_data::deformations::{Damage, damaged_mesh};
 use mfm_deform::DeformSpace;
-use mfm_fm::deformations::{Damage, damaged_mesh};
 use mfm_geometry::subdivide;
 use std::path::PathBuf;
 

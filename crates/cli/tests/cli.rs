@@ -11,6 +11,7 @@ fn mfm(args: &[&str]) -> Output {
         .expect("the mfm binary runs")
 }
 
+#[cfg(feature = "network")]
 /// Writes `config` to `DIR/run.toml` and runs `mfm train --config
 /// DIR/run.toml --dataset DIR/data/train --out DIR/run --quiet`.
 fn train_with_config(dir: &Path, config: &str) -> Output {
@@ -367,6 +368,7 @@ fn spectrum_reports_matern_variance_near_theory_and_compares_meshes() {
 }
 
 #[test]
+#[cfg(feature = "network")]
 fn net_summary_counts_match_the_reference_implementation() {
     for (preset, expected) in [
         ("paper", 1_369_600u64),
@@ -398,6 +400,7 @@ fn net_summary_counts_match_the_reference_implementation() {
 }
 
 #[test]
+#[cfg(feature = "network")]
 fn net_bench_prints_step_and_inference_medians() {
     let o = mfm(&[
         "net",
@@ -446,6 +449,7 @@ fn net_bench_prints_step_and_inference_medians() {
     assert!(stderr(&o).contains("--batch"), "{}", stderr(&o));
 }
 
+#[cfg(feature = "network")]
 fn read_npy_f32(path: &Path) -> (Vec<u64>, Vec<f32>) {
     let bytes = std::fs::read(path).unwrap();
     let npy = npyz::NpyFile::new(&bytes[..]).unwrap();
@@ -457,6 +461,7 @@ fn read_npy_f32(path: &Path) -> (Vec<u64>, Vec<f32>) {
 /// dataset -> train (with a TOML config) -> sample on another
 /// triangulation -> eval, plus the errors a user meets on the way.
 #[test]
+#[cfg(feature = "network")]
 fn gmm_dataset_train_sample_eval_end_to_end() {
     let dir = tempfile::tempdir().unwrap();
     let p = |s: &str| dir.path().join(s).to_string_lossy().into_owned();
@@ -703,6 +708,7 @@ fn gmm_dataset_train_sample_eval_end_to_end() {
 }
 
 #[test]
+#[cfg(feature = "network")]
 fn deformation_dataset_trains_on_coarse_and_samples_on_finer_meshes() {
     let dir = tempfile::tempdir().unwrap();
     let p = |s: &str| dir.path().join(s).to_string_lossy().into_owned();

@@ -307,24 +307,26 @@ property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_he
     let at = raw.len() - 4 * 7;
     raw[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
     fs::write(&signals, &raw).unwrap();
-    refused(
-        d,
-        &[
-            "train",
-            "--preset",
-            "cpu",
-            "--dataset",
-            "data/train",
-            "--out",
-            "run",
-            "--steps",
-            "2",
-            "--quiet",
-        ],
-        "signal 2, vertex",
-    );
-    // ...and the failed start leaves no run folder behind
-    assert!(!d.join("run").exists());
+    if cfg!(feature = "network") {
+        refused(
+            d,
+            &[
+                "train",
+                "--preset",
+                "cpu",
+                "--dataset",
+                "data/train",
+                "--out",
+                "run",
+                "--steps",
+                "2",
+                "--quiet",
+            ],
+            "signal 2, vertex",
+        );
+        // ...and the failed start leaves no run folder behind
+        assert!(!d.join("run").exists());
+    }
     // an eval of NaN samples is an error naming the file and the sample
     refused(
         d,
@@ -375,24 +377,39 @@ property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_he
     );
     assert!(!d.join("big.npy").exists() && !d.join("big.json").exists());
     // messages for paths that are not what they should be
+    if cfg!(feature = "network") {
+        refused(
+            d,
+            &[
+                "sample", "--run", "nowhere", "--mesh", "ico.ply", "--out", "s",
+            ],
+            "nowhere: no such run folder",
+        );
+        refused(
+            d,
+            &[
+                "train",
+                "--preset",
+                "cpu",
+                "--dataset",
+                "t.npy",
+                "--out",
+                "run2",
+            ],
+            "is a file, not a dataset folder",
+        );
+    } else {
+        refused(
+            d,
+            &[
+                "sample", "--run", "nowhere", "--mesh", "ico.ply", "--out", "s",
+            ],
+            "`network` feature",
+        );
+    }
     refused(
         d,
-        &[
-            "sample", "--run", "nowhere", "--mesh", "ico.ply", "--out", "s",
-        ],
-        "nowhere: no such run folder",
-    );
-    refused(
-        d,
-        &[
-            "train",
-            "--preset",
-            "cpu",
-            "--dataset",
-            "t.npy",
-            "--out",
-            "run2",
-        ],
+        &["eval", "--samples", "t.npy", "--reference", "t.npy"],
         "is a file, not a dataset folder",
     );
     assert!(!d.join("s").exists() && !d.join("run2").exists());
@@ -400,10 +417,12 @@ property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_he
 }
 
 /// The tiny run every training check below starts from.
+#[cfg(feature = "network")]
 const TINY: &str = "[model]\npreset = \"small\"\nwidth = 8\nblocks = 1\nvector_layers = 1\n\
 [train]\nsteps = 4\nbatch = 2\ncheckpoint_every = 2\nlog_every = 1\n[sample]\nsteps = 2\n";
 
 #[test]
+#[cfg(feature = "network")]
 fn runs_survive_signals_edits_moves_and_damage() {
     let root = tempfile::tempdir().unwrap();
     let d = &root.path().join("project");

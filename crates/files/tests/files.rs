@@ -101,6 +101,16 @@ fn a_failed_write_keeps_the_old_file_and_leaves_no_debris() {
     }
     assert_eq!(fs::read_to_string(&path).unwrap(), "precious");
     assert!(leftovers(dir.path()).is_empty());
+    // a rename that fails (the target became a folder meanwhile) leaves
+    // no temporary file either
+    let racy = dir.path().join("racy.txt");
+    let mut f = mfm_files::AtomicFile::create(&racy).unwrap();
+    f.write_all(b"late").unwrap();
+    fs::create_dir(&racy).unwrap();
+    fs::write(racy.join("inside"), "x").unwrap();
+    assert!(f.commit().is_err());
+    assert!(racy.join("inside").is_file());
+    assert!(leftovers(dir.path()).is_empty());
     // a missing folder is an error naming the path
     let e = put(&dir.path().join("no/such/x.txt"), "x").unwrap_err();
     assert!(e.to_string().contains("no/such/x.txt"), "{e}");

@@ -2,8 +2,9 @@
 
 use std::path::PathBuf;
 
-/// Everything that can go wrong reading or writing a dataset, generating
-/// signals, training, sampling or computing metrics.
+/// Everything that can go wrong training, sampling, or reading and writing
+/// runs and checkpoints; dataset and metric errors arrive as
+/// [`FmError::Data`].
 ///
 /// Variants that concern a file name it, so a user can tell which of their
 /// files is at fault.
@@ -76,6 +77,9 @@ pub enum FmError {
     /// An error reported by libtorch outside the network.
     #[error("libtorch: {0}")]
     Torch(#[from] tch::TchError),
+    /// A dataset, signal, geodesic or metric error ([`mfm_data`]).
+    #[error(transparent)]
+    Data(#[from] mfm_data::DataError),
 }
 
 impl FmError {

@@ -1,23 +1,19 @@
 //! # mfm-fm
 //!
-//! Flow matching on triangle meshes (DESIGN.md sections 6-8): datasets of
-//! signals over one mesh, the GMM generator, training a PoissonNet along the
-//! rectified-flow path from Matérn noise, ODE sampling on any triangulation,
-//! checkpoints, the evaluation metrics, and sample-quality measures.
+//! Flow matching on triangle meshes (DESIGN.md sections 6-8): training a
+//! PoissonNet along the rectified-flow path from Matérn noise, ODE sampling
+//! on any triangulation, run configurations and checkpoints. The datasets,
+//! generators, metrics and quality measures live in the libtorch-free
+//! [`mfm_data`] crate and are re-exported here under their old paths.
 
 pub mod checkpoint;
 pub mod config;
-pub mod dataset;
-pub mod deformations;
 pub mod error;
-pub mod experiment;
-pub mod geodesic;
-pub mod gmm;
-pub mod metrics;
-pub mod quality;
 pub mod sample;
-pub mod signals;
 pub mod train;
 
 pub use error::{FmError, Result};
-pub use signals::{InMemorySignals, SignalSource};
+pub use mfm_data::{
+    DataError, InMemorySignals, SignalSource, dataset, deformations, experiment, geodesic, gmm,
+    metrics, quality, signals,
+};

@@ -324,6 +324,9 @@ fn runs_with_non_finite_weights_are_refused_at_load() {
         let _ = v.fill_(f64::NAN);
     });
     net.save(&weights).unwrap();
+    // as the trainer does after saving (a diverged run's record matches its
+    // NaN weights)
+    mfm_fm::checkpoint::write_final_record(run.path()).unwrap();
     let err = Sampler::load(run.path(), Some(Device::Cpu)).unwrap_err();
     assert!(matches!(err, mfm_fm::FmError::Diverged(_)), "{err}");
     let msg = err.to_string();

@@ -183,14 +183,15 @@ fn bad_scalars_are_refused_before_touching_the_file() {
 fn failed_writes_leave_nothing_behind() {
     let mesh = procedural::icosphere(0);
     let dir = tempfile::tempdir().expect("tempdir");
-    // the destination is a non-empty directory: the final rename fails
+    // the destination is a non-empty directory: refused before writing
     let target = dir.path().join("occupied.ply");
     std::fs::create_dir(&target).expect("mkdir");
     std::fs::write(target.join("inside.txt"), b"keep me").expect("write");
     let err = io::write_ply(&target, &mesh, &[]).expect_err("cannot replace a directory");
-    assert!(matches!(err.kind(), WriteErrorKind::Io(_)));
+    assert!(matches!(err.kind(), WriteErrorKind::Refused(_)), "{err}");
+    assert!(err.to_string().contains("is a folder"), "{err}");
     let err = io::write_obj(&target, &mesh).expect_err("cannot replace a directory");
-    assert!(matches!(err.kind(), WriteErrorKind::Io(_)));
+    assert!(matches!(err.kind(), WriteErrorKind::Refused(_)), "{err}");
     assert_eq!(
         std::fs::read(target.join("inside.txt")).expect("kept"),
         b"keep me"

@@ -409,7 +409,10 @@ impl NoiseSampler {
     /// already has.
     ///
     /// # Errors
-    /// [`NoiseError::InvalidParameter`], [`NoiseError::SizeMismatch`],
+    /// [`NoiseError::InvalidParameter`] (also for Matérn with
+    /// `0 < tau < ZERO_TAU_REGULARIZATION * Gamma`: below the regularization
+    /// that `tau = 0` itself gets, `L + tau M` cannot be factored reliably),
+    /// [`NoiseError::SizeMismatch`],
     /// [`NoiseError::NonPositiveMass`], [`NoiseError::Operators`] (a
     /// non-square `l`), [`NoiseError::Solver`] (the factorization or the
     /// eigensolve failed, e.g. `k > V` or `L` not PSD).

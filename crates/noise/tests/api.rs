@@ -366,3 +366,26 @@ proptest! {
         prop_assert!(json.contains(&tag), "{} lacks {}", json, tag);
     }
 }
+
+#[test]
+fn tau_below_the_zero_tau_regularization_is_refused_by_name() {
+    let mesh = mfm_geometry::procedural::icosphere(2);
+    let ops = Operators::new(&mesh).unwrap();
+    let gamma = mfm_geometry::operators::gamma(&ops.laplacian, &ops.mass);
+    let bound = mfm_noise::sampler::ZERO_TAU_REGULARIZATION * gamma;
+    match NoiseSampler::new(&mesh, NoiseKind::Matern { tau: 1e-15 }) {
+        Err(NoiseError::InvalidParameter { name, found, .. }) => {
+            assert_eq!(name, "tau");
+            assert!(found.starts_with("1e-15, below 1e-10 x Gamma"), "{found}");
+        }
+        other => panic!("expected a refusal, got {other:?}"),
+    }
+    // the bound itself, and tau = 0, sample finite values
+    for tau in [bound, 0.0] {
+        let s = NoiseSampler::new(&mesh, NoiseKind::Matern { tau }).unwrap();
+        let b = s.sample_range(0, 2, 1, 3).unwrap();
+        assert!(b.data().iter().all(|x| x.is_finite()), "tau = {tau}");
+    }
+    // extreme values print in scientific notation
+    assert_eq!(NoiseKind::Matern { tau: 1e300 }.to_string(), "matern:1e300");
+}

@@ -36,7 +36,7 @@
 //!
 //! # Example
 //! ```
-//! use mfm_fm::geodesic::HeatGeodesics;
+//! use mfm_data::geodesic::HeatGeodesics;
 //! use mfm_geometry::procedural;
 //! let sphere = procedural::icosphere(3);
 //! let geo = HeatGeodesics::new(&sphere).unwrap();
@@ -59,7 +59,7 @@ use mfm_geometry::operators::Operators;
 use mfm_geometry::{Topology, TriMesh};
 use mfm_solver::{LaplacianSolver, ScreenedPoisson};
 
-use crate::error::{FmError, Result};
+use crate::error::{DataError, Result};
 
 /// Factored heat-method operators of one mesh, answering distance queries
 /// from any number of source vertices (see the [module docs](self)).
@@ -84,8 +84,8 @@ impl HeatGeodesics {
     /// Cost: two sparse Cholesky factorizations of `V x V` mesh matrices.
     ///
     /// # Errors
-    /// [`FmError::Operators`] for a mesh with degenerate faces,
-    /// [`FmError::Solver`] if a factorization fails (e.g. a vertex no face
+    /// [`DataError::Operators`] for a mesh with degenerate faces,
+    /// [`DataError::Solver`] if a factorization fails (e.g. a vertex no face
     /// uses has zero mass).
     pub fn new(mesh: &TriMesh) -> Result<Self> {
         Self::with_time_factor(mesh, 1.0)
@@ -95,18 +95,18 @@ impl HeatGeodesics {
     /// give smoother, less accurate distances (useful on noisy meshes).
     ///
     /// # Errors
-    /// As [`HeatGeodesics::new`], plus [`FmError::Config`] unless
+    /// As [`HeatGeodesics::new`], plus [`DataError::Config`] unless
     /// `time_factor` is finite and positive.
     pub fn with_time_factor(mesh: &TriMesh, time_factor: f64) -> Result<Self> {
         if !(time_factor.is_finite() && time_factor > 0.0) {
-            return Err(FmError::Config(format!(
+            return Err(DataError::Config(format!(
                 "the heat-method time factor must be finite and > 0, found {time_factor}"
             )));
         }
         let ops = Operators::new(mesh)?;
         let h = mean_edge_length(mesh);
         if !(h.is_finite() && h > 0.0) {
-            return Err(FmError::Config(format!(
+            return Err(DataError::Config(format!(
                 "the mesh's mean edge length must be finite and > 0, found {h}"
             )));
         }
@@ -142,8 +142,8 @@ impl HeatGeodesics {
     /// 0 at the source, never negative).
     ///
     /// # Errors
-    /// [`FmError::SizeMismatch`] if `source` is not a vertex;
-    /// [`FmError::Solver`] if a solve fails.
+    /// [`DataError::SizeMismatch`] if `source` is not a vertex;
+    /// [`DataError::Solver`] if a solve fails.
     pub fn distance(&self, source: usize) -> Result<Vec<f64>> {
         let mut all = self.distances(&[source])?;
         Ok(all.pop().unwrap_or_default())
@@ -157,7 +157,7 @@ impl HeatGeodesics {
     pub fn distances(&self, sources: &[usize]) -> Result<Vec<Vec<f64>>> {
         let n = self.num_vertices();
         if let Some(&bad) = sources.iter().find(|&&s| s >= n) {
-            return Err(FmError::SizeMismatch {
+            return Err(DataError::SizeMismatch {
                 what: "geodesic source vertex index".into(),
                 expected: n,
                 found: bad,
@@ -329,7 +329,7 @@ mod tests {
         }
         assert!(matches!(
             geo.distance(sphere.num_vertices()),
-            Err(FmError::SizeMismatch { .. })
+            Err(DataError::SizeMismatch { .. })
         ));
         assert!(HeatGeodesics::with_time_factor(&sphere, 0.0).is_err());
     }

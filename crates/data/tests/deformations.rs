@@ -3,11 +3,11 @@
 //! the handle regions.
 #![allow(clippy::unwrap_used)]
 
-use mfm_fm::dataset::Dataset;
-use mfm_fm::deformations::{
+use mfm_data::dataset::Dataset;
+use mfm_data::deformations::{
     self, Damage, DeformManifest, DeformMeshes, PARAMS_FILE, damaged_mesh, plausibility,
 };
-use mfm_fm::{InMemorySignals, SignalSource};
+use mfm_data::{InMemorySignals, SignalSource};
 use mfm_geometry::procedural;
 
 fn meshes() -> DeformMeshes {

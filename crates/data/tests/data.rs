@@ -5,11 +5,11 @@
 use std::fs::OpenOptions;
 use std::path::Path;
 
-use mfm_fm::dataset::{Dataset, MANIFEST_FILE, MESH_FILE, Manifest, SIGNALS_FILE, WriteOptions};
-use mfm_fm::experiment::{GmmMeshes, HalfDensity, split_x};
-use mfm_fm::geodesic::HeatGeodesics;
-use mfm_fm::gmm::{GENERATOR_NAME, GmmConfig, GmmDistance, GmmGenerator, generate};
-use mfm_fm::{FmError, InMemorySignals, SignalSource};
+use mfm_data::dataset::{Dataset, MANIFEST_FILE, MESH_FILE, Manifest, SIGNALS_FILE, WriteOptions};
+use mfm_data::experiment::{GmmMeshes, HalfDensity, split_x};
+use mfm_data::geodesic::HeatGeodesics;
+use mfm_data::gmm::{GENERATOR_NAME, GmmConfig, GmmDistance, GmmGenerator, generate};
+use mfm_data::{DataError, InMemorySignals, SignalSource};
 use mfm_geometry::operators::lumped_mass;
 use mfm_geometry::refine::{RefineCriterion, refine_region};
 use mfm_geometry::{TriMesh, procedural};
@@ -46,9 +46,9 @@ fn write_npy(path: &Path, dtype: &str, shape: &[u64], values: usize) {
     }
 }
 
-fn format_error(err: FmError) -> (std::path::PathBuf, String) {
+fn format_error(err: DataError) -> (std::path::PathBuf, String) {
     match err {
-        FmError::Format { path, message } => (path, message),
+        DataError::Format { path, message } => (path, message),
         other => panic!("expected a format error, got {other:?}"),
     }
 }
@@ -90,7 +90,7 @@ fn dataset_round_trip_and_subsets() {
     let mut out = vec![0.0f32; n];
     assert!(matches!(
         ds.read_into(&[6], &mut out),
-        Err(FmError::SizeMismatch { .. })
+        Err(DataError::SizeMismatch { .. })
     ));
     assert!(ds.read_into(&[0, 1], &mut out).is_err());
 
@@ -110,7 +110,7 @@ fn dataset_refuses_to_overwrite_unless_asked() {
     let err =
         Dataset::write(&dir, &mesh, &b, Manifest::new("b", serde_json::Value::Null)).unwrap_err();
     assert!(
-        matches!(&err, FmError::Io { path, .. } if path == &dir),
+        matches!(&err, DataError::Io { path, .. } if path == &dir),
         "{err}"
     );
     // untouched
@@ -144,7 +144,7 @@ fn dataset_refuses_to_overwrite_unless_asked() {
             &a,
             Manifest::new("a", serde_json::Value::Null)
         ),
-        Err(FmError::SizeMismatch { .. })
+        Err(DataError::SizeMismatch { .. })
     ));
     assert!(!other.exists());
 }
@@ -268,10 +268,10 @@ fn wrong_shape_dtype_and_manifest_are_named() {
 
     // missing files name themselves
     std::fs::remove_file(&manifest).unwrap();
-    assert!(matches!(Dataset::open(&dir), Err(FmError::Io { path, .. }) if path == manifest));
+    assert!(matches!(Dataset::open(&dir), Err(DataError::Io { path, .. }) if path == manifest));
     assert!(matches!(
         Dataset::open(tmp.path().join("nope")),
-        Err(FmError::Io { .. })
+        Err(DataError::Io { .. })
     ));
 }
 
@@ -458,7 +458,7 @@ fn gmm_is_scale_free_and_reports_progress() {
         assert!(done >= 1 && done <= total && total == 6);
         calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     };
-    let options = mfm_fm::gmm::GenerateOptions {
+    let options = mfm_data::gmm::GenerateOptions {
         on_progress: Some(&callback),
         ..Default::default()
     };
@@ -492,7 +492,7 @@ fn gmm_config_checks_and_records_itself() {
     ] {
         assert!(matches!(
             GmmGenerator::new(&mesh, &bad),
-            Err(FmError::Config(_))
+            Err(DataError::Config(_))
         ));
     }
     // impossible separation: a clear error, not a hang

@@ -1,7 +1,7 @@
 //! [`SignalSource`]: where training reads its signals from, one batch at a
 //! time, without holding a large dataset in memory.
 
-use crate::error::{FmError, Result};
+use crate::error::{DataError, Result};
 
 /// A set of `len()` signals over one mesh, each `num_vertices() x channels()`
 /// values (vertex-major, like a `V x 3` position array when `channels == 3`).
@@ -23,7 +23,7 @@ pub trait SignalSource: Send + Sync {
     /// `[indices.len(), V, C]`.
     ///
     /// # Errors
-    /// [`FmError::SizeMismatch`] if `out` has the wrong length or an index is
+    /// [`DataError::SizeMismatch`] if `out` has the wrong length or an index is
     /// out of range; I/O or format errors of the backing storage.
     fn read_into(&self, indices: &[usize], out: &mut [f32]) -> Result<()>;
 }
@@ -33,7 +33,7 @@ pub trait SignalSource: Send + Sync {
 /// `indices.len() * row_values` and every index below `len`.
 ///
 /// # Errors
-/// [`FmError::SizeMismatch`] naming the output buffer or the first bad index.
+/// [`DataError::SizeMismatch`] naming the output buffer or the first bad index.
 pub(crate) fn check_read_request(
     len: usize,
     row_values: usize,
@@ -41,14 +41,14 @@ pub(crate) fn check_read_request(
     out_len: usize,
 ) -> Result<()> {
     if out_len != indices.len() * row_values {
-        return Err(FmError::SizeMismatch {
+        return Err(DataError::SizeMismatch {
             what: "output buffer".into(),
             expected: indices.len() * row_values,
             found: out_len,
         });
     }
     if let Some(&bad) = indices.iter().find(|&&i| i >= len) {
-        return Err(FmError::SizeMismatch {
+        return Err(DataError::SizeMismatch {
             what: "signal index".into(),
             expected: len,
             found: bad,
@@ -61,7 +61,7 @@ pub(crate) fn check_read_request(
 ///
 /// # Example
 /// ```
-/// use mfm_fm::signals::{InMemorySignals, SignalSource};
+/// use mfm_data::signals::{InMemorySignals, SignalSource};
 /// let s = InMemorySignals::new(vec![1.0, 2.0, 3.0, 4.0], 2, 2, 1).unwrap();
 /// let mut out = [0.0f32; 2];
 /// s.read_into(&[1], &mut out).unwrap();
@@ -79,14 +79,14 @@ impl InMemorySignals {
     /// Wraps `data`, row-major `[len, vertices, channels]`.
     ///
     /// # Errors
-    /// [`FmError::SizeMismatch`] if the length is not the product of the sizes.
+    /// [`DataError::SizeMismatch`] if the length is not the product of the sizes.
     pub fn new(data: Vec<f32>, len: usize, vertices: usize, channels: usize) -> Result<Self> {
         let expected = len
             .checked_mul(vertices)
             .and_then(|x| x.checked_mul(channels))
-            .ok_or_else(|| FmError::Config("signal array size overflows usize".into()))?;
+            .ok_or_else(|| DataError::Config("signal array size overflows usize".into()))?;
         if data.len() != expected {
-            return Err(FmError::SizeMismatch {
+            return Err(DataError::SizeMismatch {
                 what: format!("signal data for [{len}, {vertices}, {channels}]"),
                 expected,
                 found: data.len(),
@@ -173,13 +173,13 @@ impl FramedPositions {
     /// Wraps `inner`, whose signals must have 3 channels.
     ///
     /// # Errors
-    /// [`FmError::SizeMismatch`] when `inner` does not have 3 channels.
+    /// [`DataError::SizeMismatch`] when `inner` does not have 3 channels.
     pub fn new(
         inner: std::sync::Arc<dyn SignalSource>,
         frame: mfm_geometry::frame::CanonicalFrame,
     ) -> Result<Self> {
         if inner.channels() != 3 {
-            return Err(FmError::SizeMismatch {
+            return Err(DataError::SizeMismatch {
                 what: "channels of position signals".into(),
                 expected: 3,
                 found: inner.channels(),

@@ -35,7 +35,7 @@ use mfm_geometry::TriMesh;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{FmError, Result};
+use crate::error::{DataError, Result};
 use crate::gmm::GmmGenerator;
 use crate::metrics::MassWeighted;
 use crate::signals::{InMemorySignals, SignalSource};
@@ -113,7 +113,7 @@ pub struct BumpFit {
 /// candidate (cached by the generator).
 ///
 /// # Errors
-/// [`FmError::SizeMismatch`] when `signal` or `mass` do not have one value
+/// [`DataError::SizeMismatch`] when `signal` or `mass` do not have one value
 /// per vertex; distance-field errors.
 pub fn fit_bumps(
     generator: &GmmGenerator,
@@ -128,7 +128,7 @@ pub fn fit_bumps(
         ("generator vertices", generator.num_vertices()),
     ] {
         if n != v {
-            return Err(FmError::SizeMismatch {
+            return Err(DataError::SizeMismatch {
                 what: format!("{what} for the bump fit (one per mesh vertex)"),
                 expected: v,
                 found: n,
@@ -327,7 +327,7 @@ impl GmmQuality {
     /// Fits every signal of `signals` (one channel, on `mesh`) in parallel.
     ///
     /// # Errors
-    /// [`FmError::SizeMismatch`] for signals that are not one channel on
+    /// [`DataError::SizeMismatch`] for signals that are not one channel on
     /// `mesh`; as [`fit_bumps`].
     pub fn of(
         generator: &GmmGenerator,
@@ -336,7 +336,7 @@ impl GmmQuality {
         signals: &InMemorySignals,
     ) -> Result<Self> {
         if signals.channels() != 1 || signals.num_vertices() != mesh.num_vertices() {
-            return Err(FmError::SizeMismatch {
+            return Err(DataError::SizeMismatch {
                 what: "values per GMM signal (one channel per vertex of the mesh)".into(),
                 expected: mesh.num_vertices(),
                 found: signals.num_vertices() * signals.channels(),
@@ -448,12 +448,12 @@ impl GmmQualityReport {
 /// sample.
 ///
 /// # Errors
-/// [`FmError::SizeMismatch`] when the sets do not live on `mass`'s mesh or
+/// [`DataError::SizeMismatch`] when the sets do not live on `mass`'s mesh or
 /// have fewer than 2 samples; distance errors.
 pub fn diversity(mass: &[f64], set: &InMemorySignals, reference: &InMemorySignals) -> Result<f64> {
     let median_pair = |s: &InMemorySignals| -> Result<f64> {
         if s.len() < 2 {
-            return Err(FmError::SizeMismatch {
+            return Err(DataError::SizeMismatch {
                 what: "samples for the diversity measure (at least 2)".into(),
                 expected: 2,
                 found: s.len(),

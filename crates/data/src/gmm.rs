@@ -44,8 +44,8 @@
 //!
 //! # Example
 //! ```
-//! use mfm_fm::gmm::{generate, GmmConfig};
-//! use mfm_fm::SignalSource;
+//! use mfm_data::gmm::{generate, GmmConfig};
+//! use mfm_data::SignalSource;
 //! use mfm_geometry::procedural;
 //! let mesh = procedural::icosphere(3);
 //! let signals = generate(&mesh, &GmmConfig::default(), 4, 42).unwrap();
@@ -63,7 +63,7 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{FmError, Result};
+use crate::error::{DataError, Result};
 use crate::geodesic::HeatGeodesics;
 use crate::signals::InMemorySignals;
 
@@ -134,12 +134,12 @@ impl GmmConfig {
     /// Checks every field.
     ///
     /// # Errors
-    /// [`FmError::Config`] naming the field: `bumps` or `max_attempts` zero,
+    /// [`DataError::Config`] naming the field: `bumps` or `max_attempts` zero,
     /// `sigma` or `heat_time_factor` not finite and positive,
     /// `min_separation` negative or not finite.
     pub fn validate(&self) -> Result<()> {
         let bad = |field: &str, requirement: &str, found: String| {
-            Err(FmError::Config(format!(
+            Err(DataError::Config(format!(
                 "gmm.{field} must be {requirement}, found {found}"
             )))
         };
@@ -189,10 +189,10 @@ impl GmmConfig {
     /// their defaults).
     ///
     /// # Errors
-    /// [`FmError::Config`] for unknown fields or wrong types.
+    /// [`DataError::Config`] for unknown fields or wrong types.
     pub fn from_manifest_params(params: &serde_json::Value) -> Result<Self> {
         serde_json::from_value(params.clone())
-            .map_err(|e| FmError::Config(format!("gmm generator parameters: {e}")))
+            .map_err(|e| DataError::Config(format!("gmm generator parameters: {e}")))
     }
 }
 
@@ -247,9 +247,9 @@ impl GmmGenerator {
     /// distance) factors the heat-method operators of `mesh`.
     ///
     /// # Errors
-    /// [`GmmConfig::validate`]'s errors; [`FmError::Operators`] or
-    /// [`FmError::Solver`] from [`HeatGeodesics::with_time_factor`];
-    /// [`FmError::Config`] if the mesh has no area.
+    /// [`GmmConfig::validate`]'s errors; [`DataError::Operators`] or
+    /// [`DataError::Solver`] from [`HeatGeodesics::with_time_factor`];
+    /// [`DataError::Config`] if the mesh has no area.
     pub fn new(mesh: &TriMesh, config: &GmmConfig) -> Result<Self> {
         config.validate()?;
         let mass = lumped_mass(mesh);
@@ -262,7 +262,7 @@ impl GmmGenerator {
             })
             .collect();
         if !(total.is_finite() && total > 0.0) {
-            return Err(FmError::Config(format!(
+            return Err(DataError::Config(format!(
                 "the mesh must have a finite, positive area to place bumps, found {total}"
             )));
         }
@@ -326,12 +326,12 @@ impl GmmGenerator {
     /// Distance from vertex `center` to every vertex (`f32`, cached).
     ///
     /// # Errors
-    /// [`FmError::SizeMismatch`] for a bad vertex, [`FmError::Solver`].
+    /// [`DataError::SizeMismatch`] for a bad vertex, [`DataError::Solver`].
     pub fn distance_field(&self, center: usize) -> Result<Arc<[f32]>> {
         let slot = self
             .cache
             .get(center)
-            .ok_or_else(|| FmError::SizeMismatch {
+            .ok_or_else(|| DataError::SizeMismatch {
                 what: "bump center vertex index".into(),
                 expected: self.positions.len(),
                 found: center,
@@ -372,10 +372,10 @@ impl GmmGenerator {
     /// bit-identical to those computed on demand, so results do not change.
     ///
     /// # Errors
-    /// [`FmError::SizeMismatch`] for a bad vertex, [`FmError::Solver`].
+    /// [`DataError::SizeMismatch`] for a bad vertex, [`DataError::Solver`].
     pub fn precompute(&self, vertices: &[usize]) -> Result<()> {
         if let Some(&bad) = vertices.iter().find(|&&v| v >= self.positions.len()) {
-            return Err(FmError::SizeMismatch {
+            return Err(DataError::SizeMismatch {
                 what: "bump center vertex index".into(),
                 expected: self.positions.len(),
                 found: bad,
@@ -440,7 +440,7 @@ impl GmmGenerator {
                 }
             }
             if !placed {
-                return Err(FmError::Config(format!(
+                return Err(DataError::Config(format!(
                     "could not place bump {} of {k} at least {:.4} (min_separation {} x sigma {:.4}) \
                      from the others in {} draws; lower gmm.min_separation or gmm.sigma",
                     bump + 1,
@@ -476,7 +476,7 @@ impl GmmGenerator {
     /// order they were placed.
     ///
     /// # Errors
-    /// [`FmError::Config`] if a center cannot be placed in
+    /// [`DataError::Config`] if a center cannot be placed in
     /// [`GmmConfig::max_attempts`] draws; solver errors.
     pub fn centers(&self, seed: u64, index: u64) -> Result<Vec<usize>> {
         self.centers_and_fields(seed, index, false).map(|(c, _)| c)
@@ -529,7 +529,7 @@ impl GmmGenerator {
         let v = self.num_vertices();
         let total = n
             .checked_mul(v)
-            .ok_or_else(|| FmError::Config(format!("{n} samples of {v} vertices overflow")))?;
+            .ok_or_else(|| DataError::Config(format!("{n} samples of {v} vertices overflow")))?;
         let mut data = vec![0.0f32; total];
         let bar = options.progress_bar.then(|| {
             let bar = indicatif::ProgressBar::new(n as u64);

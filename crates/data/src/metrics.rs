@@ -37,8 +37,8 @@
 //!
 //! # Example
 //! ```
-//! use mfm_fm::metrics::{evaluate, mass_weighted_distance};
-//! use mfm_fm::InMemorySignals;
+//! use mfm_data::metrics::{evaluate, mass_weighted_distance};
+//! use mfm_data::InMemorySignals;
 //! let mass = [1.0, 1.0, 2.0];
 //! // one channel, 3 vertices: d = sqrt((1*1 + 0 + 2*0) / 4) = 0.5
 //! assert_eq!(mass_weighted_distance(&mass, 1, &[1.0, 0.0, 0.0], &[0.0, 0.0, 0.0]).unwrap(), 0.5);
@@ -50,7 +50,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{FmError, Result};
+use crate::error::{DataError, Result};
 use crate::signals::{InMemorySignals, SignalSource};
 
 /// All metrics of one evaluation (see the [module docs](self) for the
@@ -87,26 +87,26 @@ impl MassWeighted {
     /// Normalizes `mass` (one non-negative value per vertex, positive sum).
     ///
     /// # Errors
-    /// [`FmError::Config`] for an empty mass, a negative or non-finite mass,
+    /// [`DataError::Config`] for an empty mass, a negative or non-finite mass,
     /// a zero total, or zero channels.
     pub fn new(mass: &[f64], channels: usize) -> Result<Self> {
         if channels == 0 {
-            return Err(FmError::Config(
+            return Err(DataError::Config(
                 "signals must have at least one channel".into(),
             ));
         }
         if mass.is_empty() {
-            return Err(FmError::Config("the vertex mass is empty".into()));
+            return Err(DataError::Config("the vertex mass is empty".into()));
         }
         if let Some(v) = mass.iter().position(|m| !(m.is_finite() && *m >= 0.0)) {
-            return Err(FmError::Config(format!(
+            return Err(DataError::Config(format!(
                 "vertex mass must be finite and >= 0, found {} at vertex {v}",
                 mass[v]
             )));
         }
         let total: f64 = mass.iter().sum();
         if !(total > 0.0 && total.is_finite()) {
-            return Err(FmError::Config(format!(
+            return Err(DataError::Config(format!(
                 "the total vertex mass must be positive and finite, found {total}"
             )));
         }
@@ -129,14 +129,14 @@ impl MassWeighted {
     /// Checks that `signals` lives on this mesh.
     fn check(&self, signals: &InMemorySignals, what: &str) -> Result<()> {
         if signals.num_vertices() != self.num_vertices() {
-            return Err(FmError::SizeMismatch {
+            return Err(DataError::SizeMismatch {
                 what: format!("vertices of the {what} signals"),
                 expected: self.num_vertices(),
                 found: signals.num_vertices(),
             });
         }
         if signals.channels() != self.channels {
-            return Err(FmError::SizeMismatch {
+            return Err(DataError::SizeMismatch {
                 what: format!("channels of the {what} signals"),
                 expected: self.channels,
                 found: signals.channels(),
@@ -170,11 +170,11 @@ impl MassWeighted {
     /// `d(a, b)` for two signals of `V x C` values.
     ///
     /// # Errors
-    /// [`FmError::SizeMismatch`] if a signal does not have `V x C` values.
+    /// [`DataError::SizeMismatch`] if a signal does not have `V x C` values.
     pub fn distance(&self, a: &[f32], b: &[f32]) -> Result<f64> {
         for (s, what) in [(a, "first signal"), (b, "second signal")] {
             if s.len() != self.signal_len() {
-                return Err(FmError::SizeMismatch {
+                return Err(DataError::SizeMismatch {
                     what: what.into(),
                     expected: self.signal_len(),
                     found: s.len(),
@@ -187,7 +187,7 @@ impl MassWeighted {
     /// The `x.len() x y.len()` matrix of distances `d(x_i, y_j)`, row-major.
     ///
     /// # Errors
-    /// [`FmError::SizeMismatch`] if a set is not on this mesh.
+    /// [`DataError::SizeMismatch`] if a set is not on this mesh.
     pub fn pairwise(&self, x: &InMemorySignals, y: &InMemorySignals) -> Result<DistanceMatrix> {
         self.check(x, "first")?;
         self.check(y, "second")?;
@@ -210,8 +210,8 @@ impl MassWeighted {
     /// The mass-weighted mean over vertices of `|mean(x)_v - mean(y)_v|`.
     ///
     /// # Errors
-    /// [`FmError::SizeMismatch`] if a set is not on this mesh,
-    /// [`FmError::Config`] if a set is empty.
+    /// [`DataError::SizeMismatch`] if a set is not on this mesh,
+    /// [`DataError::Config`] if a set is empty.
     pub fn mean_abs_difference(&self, x: &InMemorySignals, y: &InMemorySignals) -> Result<f64> {
         self.check(x, "first")?;
         self.check(y, "second")?;
@@ -270,7 +270,7 @@ fn argmin(items: impl Iterator<Item = (usize, f64)>) -> Option<(usize, f64)> {
 /// Point-wise mean of a set of signals (`V x C` values, in `f64`).
 fn pointwise_mean(x: &InMemorySignals) -> Result<Vec<f64>> {
     if x.is_empty() {
-        return Err(FmError::Config(
+        return Err(DataError::Config(
             "cannot average an empty set of signals".into(),
         ));
     }
@@ -299,7 +299,7 @@ pub fn mass_weighted_distance(mass: &[f64], channels: usize, a: &[f32], b: &[f32
 /// the mean over rows of the row minimum.
 ///
 /// # Errors
-/// [`FmError::Config`] if the matrix has no rows or no columns.
+/// [`DataError::Config`] if the matrix has no rows or no columns.
 pub fn mmd(gen_ref: &DistanceMatrix) -> Result<f64> {
     check_non_empty(gen_ref)?;
     let total: f64 = (0..gen_ref.rows)
@@ -312,7 +312,7 @@ pub fn mmd(gen_ref: &DistanceMatrix) -> Result<f64> {
 /// columns that are the minimum of at least one row.
 ///
 /// # Errors
-/// [`FmError::Config`] if the matrix has no rows or no columns.
+/// [`DataError::Config`] if the matrix has no rows or no columns.
 pub fn coverage(gen_ref: &DistanceMatrix) -> Result<f64> {
     check_non_empty(gen_ref)?;
     let mut hit = vec![false; gen_ref.cols];
@@ -329,7 +329,7 @@ pub fn coverage(gen_ref: &DistanceMatrix) -> Result<f64> {
 /// reference.
 ///
 /// # Errors
-/// [`FmError::SizeMismatch`] if the shapes disagree, [`FmError::Config`] if
+/// [`DataError::SizeMismatch`] if the shapes disagree, [`DataError::Config`] if
 /// either set is empty.
 pub fn one_nna(
     gen_gen: &DistanceMatrix,
@@ -340,7 +340,7 @@ pub fn one_nna(
     let (n, k) = (gen_ref.rows, gen_ref.cols);
     for (m, what, size) in [(gen_gen, "generated", n), (ref_ref, "reference", k)] {
         if m.rows != size || m.cols != size {
-            return Err(FmError::SizeMismatch {
+            return Err(DataError::SizeMismatch {
                 what: format!("{what} x {what} distance matrix side"),
                 expected: size,
                 found: if m.rows != size { m.rows } else { m.cols },
@@ -383,7 +383,7 @@ pub fn one_nna(
 
 fn check_non_empty(m: &DistanceMatrix) -> Result<()> {
     if m.rows == 0 || m.cols == 0 {
-        return Err(FmError::Config(format!(
+        return Err(DataError::Config(format!(
             "metrics need non-empty generated and reference sets, found {} and {}",
             m.rows, m.cols
         )));
@@ -397,8 +397,8 @@ fn check_non_empty(m: &DistanceMatrix) -> Result<()> {
 /// Cost: three distance matrices, `O((n + k)^2 V C)` (parallel).
 ///
 /// # Errors
-/// [`FmError::Config`] for an invalid mass or an empty set,
-/// [`FmError::SizeMismatch`] if the sets do not live on the mesh or differ in
+/// [`DataError::Config`] for an invalid mass or an empty set,
+/// [`DataError::SizeMismatch`] if the sets do not live on the mesh or differ in
 /// channels.
 pub fn evaluate(
     mass: &[f64],

@@ -20,7 +20,7 @@
 //!
 //! # Example
 //! ```
-//! use mfm_fm::experiment::{GmmMeshes, HalfDensity};
+//! use mfm_data::experiment::{GmmMeshes, HalfDensity};
 //! use mfm_geometry::procedural;
 //! let meshes = GmmMeshes::from_base(procedural::icosphere(2), HalfDensity::default()).unwrap();
 //! assert!(meshes.test.num_vertices() > 2 * meshes.train.num_vertices());
@@ -33,7 +33,7 @@ use mfm_geometry::operators::face_areas;
 use mfm_geometry::procedural;
 use mfm_geometry::refine::{RefineCriterion, refine_region};
 
-use crate::error::{FmError, Result};
+use crate::error::{DataError, Result};
 
 /// Subdivision level of the [`procedural::blob`] used by
 /// [`GmmMeshes::builtin`] (2562 vertices).
@@ -81,8 +81,8 @@ impl GmmMeshes {
     /// Cost: `O(F log F)` of the output.
     ///
     /// # Errors
-    /// [`FmError::Config`] for `rounds == 0` or `factor <= 1`;
-    /// [`FmError::MeshProcessing`] if refinement or decimation fails (e.g.
+    /// [`DataError::Config`] for `rounds == 0` or `factor <= 1`;
+    /// [`DataError::MeshProcessing`] if refinement or decimation fails (e.g.
     /// a non-manifold base).
     pub fn from_base(base: TriMesh, density: HalfDensity) -> Result<Self> {
         let cut = split_x(&base);
@@ -90,12 +90,12 @@ impl GmmMeshes {
         let test = match density {
             HalfDensity::Refine { rounds } => {
                 if rounds == 0 {
-                    return Err(FmError::Config(
+                    return Err(DataError::Config(
                         "the test mesh's refinement needs at least 1 round".into(),
                     ));
                 }
                 refine_region(&base, left, RefineCriterion::Rounds(rounds)).map_err(|e| {
-                    FmError::MeshProcessing {
+                    DataError::MeshProcessing {
                         what: "refining half of the GMM test mesh".into(),
                         source: Box::new(e),
                     }
@@ -103,7 +103,7 @@ impl GmmMeshes {
             }
             HalfDensity::Coarsen { factor } => {
                 if !(factor.is_finite() && factor > 1.0) {
-                    return Err(FmError::Config(format!(
+                    return Err(DataError::Config(format!(
                         "the test mesh's coarsening factor must be finite and > 1, found {factor}"
                     )));
                 }
@@ -117,7 +117,7 @@ impl GmmMeshes {
                 let target = base.num_faces().saturating_sub(removed);
                 let region: &dyn Fn([f64; 3]) -> bool = &left;
                 decimate(&base, target, Some(region))
-                    .map_err(|e| FmError::MeshProcessing {
+                    .map_err(|e| DataError::MeshProcessing {
                         what: "coarsening half of the GMM test mesh".into(),
                         source: Box::new(e),
                     })?
@@ -136,7 +136,7 @@ impl GmmMeshes {
     /// As [`GmmMeshes::from_base`] (not expected for the built-in shape).
     pub fn builtin() -> Result<Self> {
         let blob =
-            procedural::blob(BUILTIN_BLOB_SUBDIVISIONS).map_err(|e| FmError::MeshProcessing {
+            procedural::blob(BUILTIN_BLOB_SUBDIVISIONS).map_err(|e| DataError::MeshProcessing {
                 what: "building the built-in blob".into(),
                 source: Box::new(e),
             })?;

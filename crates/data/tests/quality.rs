@@ -2,9 +2,9 @@
 //! floor; flat, noise-only and single-mode sets score far from it.
 #![allow(clippy::unwrap_used)]
 
-use mfm_fm::gmm::{GmmConfig, GmmGenerator};
-use mfm_fm::quality::{GmmQualityReport, Quartiles, diversity, fit_bumps};
-use mfm_fm::{InMemorySignals, SignalSource};
+use mfm_data::gmm::{GmmConfig, GmmGenerator};
+use mfm_data::quality::{GmmQualityReport, Quartiles, diversity, fit_bumps};
+use mfm_data::{InMemorySignals, SignalSource};
 use mfm_geometry::operators::lumped_mass;
 use mfm_geometry::{TriMesh, procedural};
 use mfm_noise::{NoiseKind, NoiseSampler};

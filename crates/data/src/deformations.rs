@@ -37,7 +37,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::dataset::{Dataset, Manifest};
-use crate::error::{FmError, Result};
+use crate::error::{DataError, Result};
 use crate::experiment::{GmmMeshes, HalfDensity};
 use crate::signals::{InMemorySignals, SignalSource};
 
@@ -84,12 +84,12 @@ impl DeformMeshes {
     /// Cost: `O(F log F)`.
     ///
     /// # Errors
-    /// [`FmError::Config`] for `coarse_faces < 100`;
-    /// [`FmError::MeshProcessing`] when normalization, decimation or
+    /// [`DataError::Config`] for `coarse_faces < 100`;
+    /// [`DataError::MeshProcessing`] when normalization, decimation or
     /// refinement fails (e.g. a non-manifold mesh).
     pub fn from_mesh(mesh: &TriMesh, coarse_faces: usize) -> Result<Self> {
         if coarse_faces < 100 {
-            return Err(FmError::Config(format!(
+            return Err(DataError::Config(format!(
                 "the coarse mesh needs at least 100 faces, asked for {coarse_faces}"
             )));
         }
@@ -115,8 +115,8 @@ impl DeformMeshes {
     }
 }
 
-fn mesh_error(what: &str, e: impl std::error::Error + Send + Sync + 'static) -> FmError {
-    FmError::MeshProcessing {
+fn mesh_error(what: &str, e: impl std::error::Error + Send + Sync + 'static) -> DataError {
+    DataError::MeshProcessing {
         what: what.into(),
         source: Box::new(e),
     }
@@ -140,7 +140,7 @@ impl DeformManifest {
     /// generator made it).
     ///
     /// # Errors
-    /// [`FmError::Format`] naming the manifest when `generator_params` do
+    /// [`DataError::Format`] naming the manifest when `generator_params` do
     /// not parse.
     pub fn of(dataset: &Dataset) -> Result<Option<Self>> {
         let m = dataset.manifest();
@@ -150,7 +150,7 @@ impl DeformManifest {
         serde_json::from_value(m.generator_params.clone())
             .map(Some)
             .map_err(|e| {
-                FmError::format(
+                DataError::format(
                     dataset.dir().join("manifest.json"),
                     format!("generator_params of a deform dataset: {e}"),
                 )
@@ -167,7 +167,7 @@ impl DeformManifest {
 /// 3-column solves and local SVD steps (parallel over samples).
 ///
 /// # Errors
-/// [`FmError::Deform`] (empty handle region on this mesh, ...), and the
+/// [`DataError::Deform`] (empty handle region on this mesh, ...), and the
 /// errors of [`Dataset::write`].
 #[allow(clippy::too_many_arguments)]
 pub fn write_dataset(
@@ -184,7 +184,7 @@ pub fn write_dataset(
 ) -> Result<Dataset> {
     let n = range.len();
     if n == 0 {
-        return Err(FmError::Config(
+        return Err(DataError::Config(
             "a deformation dataset needs at least 1 sample".into(),
         ));
     }
@@ -217,7 +217,7 @@ pub fn write_dataset(
     };
     let manifest = Manifest::new(
         GENERATOR,
-        serde_json::to_value(&params).map_err(|e| FmError::Config(e.to_string()))?,
+        serde_json::to_value(&params).map_err(|e| DataError::Config(e.to_string()))?,
     )
     .with_seed(seed)
     .with_provenance(provenance)
@@ -225,8 +225,8 @@ pub fn write_dataset(
     let dataset = Dataset::write(dir, mesh, &signals, manifest)?;
     let all: Vec<&DeformParams> = shapes.iter().map(|s| &s.params).collect();
     let path = dataset.dir().join(PARAMS_FILE);
-    let text = serde_json::to_string(&all).map_err(|e| FmError::Config(e.to_string()))?;
-    std::fs::write(&path, text).map_err(|e| FmError::io(&path, e))?;
+    let text = serde_json::to_string(&all).map_err(|e| DataError::Config(e.to_string()))?;
+    std::fs::write(&path, text).map_err(|e| DataError::io(&path, e))?;
     Ok(dataset)
 }
 
@@ -234,7 +234,7 @@ pub fn write_dataset(
 /// [`HandleSet::auto`]) and returns the space with the given ranges.
 ///
 /// # Errors
-/// [`FmError::Deform`] when the handles cannot be placed.
+/// [`DataError::Deform`] when the handles cannot be placed.
 pub fn space_for(
     original: &TriMesh,
     handles: usize,
@@ -280,8 +280,8 @@ pub struct Plausibility {
 /// handle and one ARAP solve (parallel over shapes).
 ///
 /// # Errors
-/// [`FmError::SizeMismatch`] when the shapes are not 3-channel signals on
-/// `mesh`; [`FmError::Deform`] (a handle region is empty on `mesh`, the ARAP
+/// [`DataError::SizeMismatch`] when the shapes are not 3-channel signals on
+/// `mesh`; [`DataError::Deform`] (a handle region is empty on `mesh`, the ARAP
 /// solve failed).
 pub fn plausibility(
     space: &DeformSpace,
@@ -290,7 +290,7 @@ pub fn plausibility(
     keep: usize,
 ) -> Result<Plausibility> {
     if shapes.channels() != 3 || shapes.num_vertices() != mesh.num_vertices() {
-        return Err(FmError::SizeMismatch {
+        return Err(DataError::SizeMismatch {
             what: "shapes for the plausibility metric (vertices x channels)".into(),
             expected: mesh.num_vertices() * 3,
             found: shapes.num_vertices() * shapes.channels(),
@@ -369,14 +369,14 @@ impl Damage {
 }
 
 impl std::str::FromStr for Damage {
-    type Err = FmError;
+    type Err = DataError;
     fn from_str(s: &str) -> Result<Self> {
         Damage::ALL
             .into_iter()
             .find(|d| d.name() == s)
             .ok_or_else(|| {
                 let names: Vec<&str> = Damage::ALL.iter().map(|d| d.name()).collect();
-                FmError::Config(format!(
+                DataError::Config(format!(
                     "unknown damage {s:?}; expected one of {}",
                     names.join(", ")
                 ))
@@ -392,8 +392,8 @@ impl std::str::FromStr for Damage {
 /// component is kept. Deterministic in `seed`.
 ///
 /// # Errors
-/// [`FmError::Config`] when no vertex is far enough from the handles for a
-/// hole; [`FmError::MeshProcessing`] when punching fails.
+/// [`DataError::Config`] when no vertex is far enough from the handles for a
+/// hole; [`DataError::MeshProcessing`] when punching fails.
 pub fn damaged_mesh(
     mesh: &TriMesh,
     space: &DeformSpace,
@@ -430,7 +430,7 @@ pub fn damaged_mesh(
         .map(|(i, _)| i)
         .collect();
     if far.len() < 3 {
-        return Err(FmError::Config(format!(
+        return Err(DataError::Config(format!(
             "no room for {} holes away from the handles",
             damage.name()
         )));
@@ -463,10 +463,10 @@ fn partial_mesh(mesh: &TriMesh, handles: &HandleSet) -> Result<TriMesh> {
         .enumerate()
         .map(|(i, &p)| (i, clearance(p)))
         .max_by(|a, b| a.1.total_cmp(&b.1))
-        .ok_or_else(|| FmError::Config("a partial mesh of an empty mesh".into()))?;
+        .ok_or_else(|| DataError::Config("a partial mesh of an empty mesh".into()))?;
     let radius = (0.2 * mesh.bounding_box_diagonal()).min(0.8 * room);
     if radius <= 0.0 {
-        return Err(FmError::Config(
+        return Err(DataError::Config(
             "no room for a missing patch away from the handles".into(),
         ));
     }

@@ -26,8 +26,8 @@
 //!
 //! # Example
 //! ```
-//! use mfm_fm::dataset::{Dataset, Manifest};
-//! use mfm_fm::{InMemorySignals, SignalSource};
+//! use mfm_data::dataset::{Dataset, Manifest};
+//! use mfm_data::{InMemorySignals, SignalSource};
 //! use mfm_geometry::procedural;
 //! let dir = std::env::temp_dir().join(format!("mfm-dataset-doc-{}", std::process::id()));
 //! let mesh = procedural::icosphere(1); // 42 vertices
@@ -53,7 +53,7 @@ use mfm_geometry::io::{read_mesh, write_ply};
 use npyz::WriterBuilder;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{FmError, Result};
+use crate::error::{DataError, Result};
 use crate::signals::{InMemorySignals, SignalSource};
 
 /// Name of the mesh file inside a dataset folder.
@@ -180,9 +180,9 @@ impl Dataset {
     /// The manifest's sizes are set from `signals`.
     ///
     /// # Errors
-    /// [`FmError::SizeMismatch`] if the signals are not on the mesh;
-    /// [`FmError::Io`] if `dir` is a non-empty folder (or not a folder), or a
-    /// file cannot be written; [`FmError::WriteMesh`].
+    /// [`DataError::SizeMismatch`] if the signals are not on the mesh;
+    /// [`DataError::Io`] if `dir` is a non-empty folder (or not a folder), or a
+    /// file cannot be written; [`DataError::WriteMesh`].
     pub fn write(
         dir: impl AsRef<Path>,
         mesh: &TriMesh,
@@ -206,7 +206,7 @@ impl Dataset {
     ) -> Result<Self> {
         let dir = dir.as_ref();
         if signals.num_vertices() != mesh.num_vertices() {
-            return Err(FmError::SizeMismatch {
+            return Err(DataError::SizeMismatch {
                 what: "vertices per signal".into(),
                 expected: mesh.num_vertices(),
                 found: signals.num_vertices(),
@@ -218,7 +218,7 @@ impl Dataset {
 
         let existing = inspect_destination(dir)?;
         if existing == Destination::NonEmpty && !options.overwrite {
-            return Err(FmError::io(
+            return Err(DataError::io(
                 dir,
                 io::Error::new(
                     io::ErrorKind::AlreadyExists,
@@ -228,27 +228,27 @@ impl Dataset {
             ));
         }
         let parent = parent_of(dir);
-        std::fs::create_dir_all(&parent).map_err(|e| FmError::io(&parent, e))?;
+        std::fs::create_dir_all(&parent).map_err(|e| DataError::io(&parent, e))?;
         let temp = sibling(dir, "tmp");
-        std::fs::create_dir(&temp).map_err(|e| FmError::io(&temp, e))?;
+        std::fs::create_dir(&temp).map_err(|e| DataError::io(&temp, e))?;
         if let Err(e) = write_files(&temp, mesh, signals, &manifest) {
             let _ = std::fs::remove_dir_all(&temp);
             return Err(e);
         }
         let swapped = match existing {
-            Destination::Missing => std::fs::rename(&temp, dir).map_err(|e| FmError::io(dir, e)),
+            Destination::Missing => std::fs::rename(&temp, dir).map_err(|e| DataError::io(dir, e)),
             Destination::Empty => std::fs::remove_dir(dir)
                 .and_then(|()| std::fs::rename(&temp, dir))
-                .map_err(|e| FmError::io(dir, e)),
+                .map_err(|e| DataError::io(dir, e)),
             Destination::NonEmpty => {
                 let old = sibling(dir, "old");
                 std::fs::rename(dir, &old)
-                    .map_err(|e| FmError::io(dir, e))
+                    .map_err(|e| DataError::io(dir, e))
                     .and_then(|()| {
                         std::fs::rename(&temp, dir).map_err(|e| {
                             // put the previous dataset back
                             let _ = std::fs::rename(&old, dir);
-                            FmError::io(dir, e)
+                            DataError::io(dir, e)
                         })
                     })
                     .map(|()| {
@@ -272,14 +272,14 @@ impl Dataset {
     /// and the `.npy` header; not the signals.
     ///
     /// # Errors
-    /// [`FmError::Io`] for a missing or unreadable file, [`FmError::Format`]
+    /// [`DataError::Io`] for a missing or unreadable file, [`DataError::Format`]
     /// (naming the file) for a malformed manifest, an unsupported format
     /// version, a wrong dtype, order or shape, sizes that disagree between the
-    /// files, or a truncated array; [`FmError::ReadMesh`] for a bad mesh.
+    /// files, or a truncated array; [`DataError::ReadMesh`] for a bad mesh.
     pub fn open(dir: impl AsRef<Path>) -> Result<Self> {
         let dir = dir.as_ref().to_path_buf();
         if dir.is_file() {
-            return Err(FmError::format(
+            return Err(DataError::format(
                 &dir,
                 format!(
                     "this is a file, not a dataset folder (a folder with {MANIFEST_FILE}, {MESH_FILE} and {SIGNALS_FILE}, as `mfm dataset` writes)"
@@ -287,18 +287,18 @@ impl Dataset {
             ));
         }
         if !dir.is_dir() {
-            return Err(FmError::io(
+            return Err(DataError::io(
                 &dir,
                 io::Error::new(io::ErrorKind::NotFound, "no such dataset folder"),
             ));
         }
         let manifest_path = dir.join(MANIFEST_FILE);
-        let text = std::fs::read(&manifest_path).map_err(|e| FmError::io(&manifest_path, e))?;
+        let text = std::fs::read(&manifest_path).map_err(|e| DataError::io(&manifest_path, e))?;
         let manifest: Manifest = serde_json::from_slice(&text).map_err(|e| {
-            FmError::format(&manifest_path, format!("not a valid dataset manifest: {e}"))
+            DataError::format(&manifest_path, format!("not a valid dataset manifest: {e}"))
         })?;
         if manifest.format_version == 0 || manifest.format_version > FORMAT_VERSION {
-            return Err(FmError::format(
+            return Err(DataError::format(
                 &manifest_path,
                 format!(
                     "format version {} is not supported (this build reads versions 1 to {FORMAT_VERSION})",
@@ -309,7 +309,7 @@ impl Dataset {
 
         let mesh_path = dir.join(MESH_FILE);
         if !mesh_path.is_file() {
-            return Err(FmError::io(
+            return Err(DataError::io(
                 &mesh_path,
                 io::Error::new(
                     io::ErrorKind::NotFound,
@@ -322,7 +322,7 @@ impl Dataset {
         let signals_path = dir.join(SIGNALS_FILE);
         let header = read_npy_header(&signals_path)?;
         let [len, vertices, channels] = header.shape;
-        let fmt = |message: String| FmError::format(&signals_path, message);
+        let fmt = |message: String| DataError::format(&signals_path, message);
         if vertices != mesh.num_vertices() {
             return Err(fmt(format!(
                 "the array has shape [{len}, {vertices}, {channels}], but {MESH_FILE} has {} vertices",
@@ -376,7 +376,7 @@ impl Dataset {
         let total = self
             .len
             .checked_mul(self.row_values())
-            .ok_or_else(|| FmError::format(&self.signals_path, "the array is too large"))?;
+            .ok_or_else(|| DataError::format(&self.signals_path, "the array is too large"))?;
         let mut data = vec![0.0f32; total];
         self.read_run(0, &mut data)?;
         InMemorySignals::new(data, self.len, self.vertices, self.channels)
@@ -391,18 +391,18 @@ impl Dataset {
     fn read_run_from(&self, file: &mut File, first: usize, out: &mut [f32]) -> Result<()> {
         let offset = self.data_offset + first as u64 * self.row_values() as u64 * VALUE_BYTES;
         file.seek(SeekFrom::Start(offset))
-            .map_err(|e| FmError::io(&self.signals_path, e))?;
+            .map_err(|e| DataError::io(&self.signals_path, e))?;
         let mut bytes = vec![0u8; (out.len() * VALUE_BYTES as usize).min(READ_CHUNK_BYTES)];
         for chunk in out.chunks_mut(READ_CHUNK_BYTES / VALUE_BYTES as usize) {
             let buf = &mut bytes[..chunk.len() * VALUE_BYTES as usize];
             file.read_exact(buf).map_err(|e| {
                 if e.kind() == io::ErrorKind::UnexpectedEof {
-                    FmError::format(
+                    DataError::format(
                         &self.signals_path,
                         "the file ended before the requested rows (truncated after it was opened?)",
                     )
                 } else {
-                    FmError::io(&self.signals_path, e)
+                    DataError::io(&self.signals_path, e)
                 }
             })?;
             for (x, b) in chunk.iter_mut().zip(buf.chunks_exact(VALUE_BYTES as usize)) {
@@ -416,7 +416,7 @@ impl Dataset {
                 (k % row) / self.channels,
                 k % self.channels,
             );
-            return Err(FmError::format(
+            return Err(DataError::format(
                 &self.signals_path,
                 format!(
                     "signal {signal}, vertex {vertex}, channel {channel} is {} (a dataset must hold finite values)",
@@ -430,7 +430,7 @@ impl Dataset {
     /// [`Dataset::read_run_from`] on a freshly opened file.
     fn read_run(&self, first: usize, out: &mut [f32]) -> Result<()> {
         let mut file =
-            File::open(&self.signals_path).map_err(|e| FmError::io(&self.signals_path, e))?;
+            File::open(&self.signals_path).map_err(|e| DataError::io(&self.signals_path, e))?;
         self.read_run_from(&mut file, first, out)
     }
 }
@@ -457,7 +457,7 @@ impl SignalSource for Dataset {
             return Ok(());
         }
         let mut file =
-            File::open(&self.signals_path).map_err(|e| FmError::io(&self.signals_path, e))?;
+            File::open(&self.signals_path).map_err(|e| DataError::io(&self.signals_path, e))?;
         let mut start = 0;
         while start < indices.len() {
             let mut end = start + 1;
@@ -482,8 +482,8 @@ enum Destination {
 fn inspect_destination(dir: &Path) -> Result<Destination> {
     match std::fs::metadata(dir) {
         Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(Destination::Missing),
-        Err(e) => Err(FmError::io(dir, e)),
-        Ok(meta) if !meta.is_dir() => Err(FmError::io(
+        Err(e) => Err(DataError::io(dir, e)),
+        Ok(meta) if !meta.is_dir() => Err(DataError::io(
             dir,
             io::Error::new(
                 io::ErrorKind::AlreadyExists,
@@ -491,7 +491,7 @@ fn inspect_destination(dir: &Path) -> Result<Destination> {
             ),
         )),
         Ok(_) => {
-            let mut entries = std::fs::read_dir(dir).map_err(|e| FmError::io(dir, e))?;
+            let mut entries = std::fs::read_dir(dir).map_err(|e| DataError::io(dir, e))?;
             Ok(if entries.next().is_some() {
                 Destination::NonEmpty
             } else {
@@ -530,12 +530,12 @@ fn write_files(
     write_ply(dir.join(MESH_FILE), mesh, &[])?;
 
     let path = dir.join(SIGNALS_FILE);
-    let io_err = |e| FmError::io(&path, e);
+    let io_err = |e| DataError::io(&path, e);
     let file = File::create(&path).map_err(io_err)?;
     let dtype = npyz::DType::Plain(
         DTYPE
             .parse()
-            .map_err(|e| FmError::format(&path, format!("internal dtype {DTYPE}: {e}")))?,
+            .map_err(|e| DataError::format(&path, format!("internal dtype {DTYPE}: {e}")))?,
     );
     let shape = [
         signals.len() as u64,
@@ -556,12 +556,12 @@ fn write_files(
 
     let path = dir.join(MANIFEST_FILE);
     let text = serde_json::to_vec_pretty(manifest)
-        .map_err(|e| FmError::format(&path, format!("cannot serialize the manifest: {e}")))?;
-    let mut file = File::create(&path).map_err(|e| FmError::io(&path, e))?;
+        .map_err(|e| DataError::format(&path, format!("cannot serialize the manifest: {e}")))?;
+    let mut file = File::create(&path).map_err(|e| DataError::io(&path, e))?;
     file.write_all(&text)
         .and_then(|()| file.write_all(b"\n"))
         .and_then(|()| file.sync_all())
-        .map_err(|e| FmError::io(&path, e))?;
+        .map_err(|e| DataError::io(&path, e))?;
     Ok(())
 }
 
@@ -574,16 +574,18 @@ struct NpyInfo {
 /// Reads and checks the header of `signals.npy`: dtype `<f4`, C order,
 /// rank 3, and a file long enough for the whole array.
 fn read_npy_header(path: &Path) -> Result<NpyInfo> {
-    let file = File::open(path).map_err(|e| FmError::io(path, e))?;
-    let file_len = file.metadata().map_err(|e| FmError::io(path, e))?.len();
+    let file = File::open(path).map_err(|e| DataError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| DataError::io(path, e))?.len();
     let mut reader = BufReader::new(file);
     let header = npyz::NpyHeader::from_reader(&mut reader)
-        .map_err(|e| FmError::format(path, format!("not a valid .npy file: {e}")))?;
-    let data_offset = reader.stream_position().map_err(|e| FmError::io(path, e))?;
+        .map_err(|e| DataError::format(path, format!("not a valid .npy file: {e}")))?;
+    let data_offset = reader
+        .stream_position()
+        .map_err(|e| DataError::io(path, e))?;
     let dtype = header.dtype();
     let dtype_ok = matches!(&dtype, npyz::DType::Plain(t) if t.to_string() == DTYPE);
     if !dtype_ok {
-        return Err(FmError::format(
+        return Err(DataError::format(
             path,
             format!(
                 "dtype is {}, expected '{DTYPE}' (little-endian float32)",
@@ -592,30 +594,30 @@ fn read_npy_header(path: &Path) -> Result<NpyInfo> {
         ));
     }
     if header.order() != npyz::Order::C {
-        return Err(FmError::format(
+        return Err(DataError::format(
             path,
             "the array is in Fortran order, expected C order",
         ));
     }
     let shape = header.shape();
     let &[n, v, c] = shape else {
-        return Err(FmError::format(
+        return Err(DataError::format(
             path,
             format!("the array has shape {shape:?}, expected 3 axes [N, V, C]"),
         ));
     };
     let to_usize = |x: u64| {
         usize::try_from(x)
-            .map_err(|_| FmError::format(path, format!("axis length {x} is too large")))
+            .map_err(|_| DataError::format(path, format!("axis length {x} is too large")))
     };
     let needed = n
         .checked_mul(v)
         .and_then(|x| x.checked_mul(c))
         .and_then(|x| x.checked_mul(VALUE_BYTES))
-        .ok_or_else(|| FmError::format(path, format!("shape {shape:?} overflows")))?;
+        .ok_or_else(|| DataError::format(path, format!("shape {shape:?} overflows")))?;
     let available = file_len.saturating_sub(data_offset);
     if available < needed {
-        return Err(FmError::format(
+        return Err(DataError::format(
             path,
             format!(
                 "truncated: shape [{n}, {v}, {c}] needs {needed} bytes of data after the header, \

@@ -2,10 +2,10 @@
 
 #![allow(clippy::unwrap_used)]
 
-use mfm_fm::metrics::{
+use mfm_data::metrics::{
     MassWeighted, Metrics, coverage, evaluate, mass_weighted_distance, mmd, one_nna,
 };
-use mfm_fm::{FmError, InMemorySignals};
+use mfm_data::{DataError, InMemorySignals};
 use proptest::prelude::*;
 
 fn set(rows: &[&[f32]], vertices: usize, channels: usize) -> InMemorySignals {
@@ -170,20 +170,20 @@ fn invalid_inputs_are_errors() {
     let (mass, g, r) = tiny();
     assert!(matches!(
         evaluate(&mass[..2], &g, &r),
-        Err(FmError::SizeMismatch { .. })
+        Err(DataError::SizeMismatch { .. })
     ));
     assert!(matches!(
         evaluate(&[1.0, -1.0, 2.0], &g, &r),
-        Err(FmError::Config(_))
+        Err(DataError::Config(_))
     ));
     assert!(matches!(
         evaluate(&[0.0, 0.0, 0.0], &g, &r),
-        Err(FmError::Config(_))
+        Err(DataError::Config(_))
     ));
     let empty = InMemorySignals::new(Vec::new(), 0, 3, 1).unwrap();
     assert!(matches!(
         evaluate(&mass, &empty, &r),
-        Err(FmError::Config(_))
+        Err(DataError::Config(_))
     ));
     let two_channels = set(&[&[0.0; 6]], 3, 2);
     assert!(evaluate(&mass, &g, &two_channels).is_err());

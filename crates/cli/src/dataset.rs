@@ -1,0 +1,362 @@
+//! `mfm dataset gmm` and `mfm dataset deform`: training and reference sets
+//! written as dataset folders.
+
+use crate::mesh_arg::load_mesh_checked;
+use crate::output::{ensure_empty, write_json};
+use crate::pictures::{channel, save_grid};
+use anyhow::{Context, Result, bail};
+use clap::{Args, Subcommand};
+use mfm_data::SignalSource;
+use mfm_data::dataset::{Dataset, Manifest};
+use mfm_data::deformations::{self, DeformMeshes};
+use mfm_data::experiment::GmmMeshes;
+use mfm_data::gmm::{GenerateOptions, GmmConfig, GmmDistance, GmmGenerator};
+use mfm_geometry::frame::CanonicalFrame;
+use mfm_geometry::render::{ColorRange, Panel};
+use mfm_geometry::{TriMesh, io};
+use std::path::{Path, PathBuf};
+
+/// `mfm dataset ...`.
+#[derive(Subcommand)]
+pub enum DatasetCommand {
+    /// The GMM experiment (after Manifold Diffusion Fields): signals made of
+    /// Gaussian bumps at centers drawn in proportion to vertex mass.
+    /// Writes OUT/train (the training set on the training mesh) and
+    /// OUT/reference (a reference set on a non-uniform test triangulation of
+    /// the same surface), each a dataset folder (mesh, signals.npy,
+    /// manifest.json), and OUT/preview.png.
+    Gmm(GmmArgs),
+    /// Elastic-looking poses of a mesh: as-rigid-as-possible deformations
+    /// driven by random rigid motions of a few handle regions (feet, trunk,
+    /// tail... picked automatically at the extremities) around a fixed
+    /// anchor. The mesh is normalized (unit bounding-box diagonal) and
+    /// decimated to the training resolution. Writes OUT/train (shapes on the
+    /// coarse mesh), OUT/reference (held-out shapes on a finer, non-uniform
+    /// triangulation: the coarse mesh with one half refined twice),
+    /// OUT/holdout (the same held-out parameters on the coarse mesh),
+    /// OUT/{original,coarse,eval}.ply, OUT/space.json (handles and ranges)
+    /// and OUT/preview.png. Each dataset folder has params.json with every
+    /// sample's handle parameters.
+    Deform(DeformArgs),
+}
+
+/// Arguments of `mfm dataset deform`.
+#[derive(Args)]
+pub struct DeformArgs {
+    /// The mesh to deform (a file or builtin:NAME), e.g.
+    /// ../shared/meshes/elephant.obj.
+    #[arg(long)]
+    mesh: String,
+    /// Output folder (must not exist or be empty).
+    #[arg(long)]
+    out: PathBuf,
+    /// Training shapes.
+    #[arg(long, default_value_t = 400)]
+    n: usize,
+    /// Held-out shapes (reference set on the evaluation mesh, and the same
+    /// parameters on the coarse mesh).
+    #[arg(long, default_value_t = 100)]
+    reference: usize,
+    /// Moving handles (the anchor comes on top).
+    #[arg(long, default_value_t = 5)]
+    handles: usize,
+    /// Handle radius as a fraction of the bounding-box diagonal.
+    #[arg(long, default_value_t = 0.08)]
+    radius: f64,
+    /// Largest handle rotation, in radians.
+    #[arg(long, default_value_t = 0.5)]
+    max_angle: f64,
+    /// Largest handle translation, as a fraction of the bounding-box diagonal.
+    #[arg(long, default_value_t = 0.12)]
+    max_shift: f64,
+    /// Faces of the coarse training mesh.
+    #[arg(long, default_value_t = 3000)]
+    coarse_faces: usize,
+    /// Seed (held-out shapes use their own stream of the same seed).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+/// Arguments of `mfm dataset gmm`.
+#[derive(Args)]
+pub struct GmmArgs {
+    /// Output folder (must not exist or be empty).
+    #[arg(long)]
+    out: PathBuf,
+    /// Training mesh, a file or builtin:NAME (default: the built-in blob,
+    /// 2562 vertices, with its test mesh whose x < centroid half is refined
+    /// twice).
+    #[arg(long)]
+    mesh: Option<String>,
+    /// Test mesh for the reference set (default: the training mesh with the
+    /// half x < centroid refined twice).
+    #[arg(long)]
+    test_mesh: Option<String>,
+    /// Training signals.
+    #[arg(long, default_value_t = 1000)]
+    n: usize,
+    /// Reference signals on the test mesh (0: no reference set).
+    #[arg(long, default_value_t = 200)]
+    reference: usize,
+    /// Bumps per signal.
+    #[arg(long, default_value_t = 3)]
+    bumps: usize,
+    /// Bump width relative to sqrt(surface area).
+    #[arg(long, default_value_t = 0.06)]
+    sigma: f64,
+    /// Smallest center separation, in bump widths.
+    #[arg(long, default_value_t = 4.0)]
+    min_separation: f64,
+    /// Use straight-line instead of geodesic (heat method) distance.
+    #[arg(long)]
+    euclidean: bool,
+    /// Seed (the reference set uses its own stream of the same seed).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+/// Runs `mfm dataset ...`.
+pub fn dataset(cmd: DatasetCommand) -> Result<()> {
+    match cmd {
+        DatasetCommand::Gmm(a) => dataset_gmm(a),
+        DatasetCommand::Deform(a) => dataset_deform(a),
+    }
+}
+
+/// Runs `mfm dataset deform`.
+fn dataset_deform(a: DeformArgs) -> Result<()> {
+    if a.n == 0 {
+        bail!("--n must be at least 1");
+    }
+    ensure_empty(&a.out)?;
+    let t0 = std::time::Instant::now();
+    let input = load_mesh_checked(&a.mesh)?;
+    let undo = dataset_undo(
+        &a.out,
+        &[
+            "train",
+            "reference",
+            "holdout",
+            "original.ply",
+            "coarse.ply",
+            "eval.ply",
+            "space.json",
+            "preview.png",
+        ],
+    )?;
+    let meshes = DeformMeshes::from_mesh(&input, a.coarse_faces)
+        .with_context(|| format!("preparing the meshes of {}", a.mesh))?;
+    let space = deformations::space_for(
+        &meshes.original,
+        a.handles,
+        a.radius,
+        a.max_angle,
+        a.max_shift,
+    )
+    .with_context(|| format!("placing {} handles on {}", a.handles, a.mesh))?;
+    for (role, m) in [
+        ("original", &meshes.original),
+        ("coarse", &meshes.coarse),
+        ("eval", &meshes.eval),
+    ] {
+        let regions = space.handles.regions(m)?;
+        let sizes: Vec<String> = regions.iter().map(|r| r.len().to_string()).collect();
+        println!(
+            "{role:>8} mesh: {:>6} vertices, {:>6} faces; handle vertices (anchor first): {}",
+            m.num_vertices(),
+            m.num_faces(),
+            sizes.join(", ")
+        );
+        io::write_ply(a.out.join(format!("{role}.ply")), m, &[])?;
+    }
+    write_json(&a.out.join("space.json"), &space)?;
+    let norm = meshes.normalization;
+    let held_out_seed = a.seed ^ 0x5eed_0f2e_f5e7;
+    let train = deformations::write_dataset(
+        &a.out.join("train"),
+        &meshes.coarse,
+        &space,
+        a.seed,
+        0..a.n,
+        norm,
+        meshes.frame,
+        "coarse",
+        &format!(
+            "mfm dataset deform: training shapes on the coarse mesh of {}",
+            a.mesh
+        ),
+        true,
+    )?;
+    if a.reference > 0 {
+        deformations::write_dataset(
+            &a.out.join("reference"),
+            &meshes.eval,
+            &space,
+            held_out_seed,
+            0..a.reference,
+            norm,
+            meshes.frame,
+            "eval",
+            &format!(
+                "mfm dataset deform: held-out shapes on the evaluation mesh of {}",
+                a.mesh
+            ),
+            true,
+        )?;
+        deformations::write_dataset(
+            &a.out.join("holdout"),
+            &meshes.coarse,
+            &space,
+            held_out_seed,
+            0..a.reference,
+            norm,
+            meshes.frame,
+            "coarse",
+            &format!(
+                "mfm dataset deform: held-out shapes on the coarse mesh of {}",
+                a.mesh
+            ),
+            true,
+        )?;
+    }
+    let preview = train.load_all()?;
+    let shapes: Vec<TriMesh> = (0..preview.len().min(8))
+        .map(|i| meshes.coarse.with_positions(preview.positions(i)))
+        .collect::<Result<_, _>>()?;
+    let mut panels = vec![Panel::new(&meshes.coarse, None, "rest")];
+    panels.extend(
+        shapes
+            .iter()
+            .enumerate()
+            .map(|(i, m)| Panel::new(m, None, format!("shape {i}"))),
+    );
+    save_grid(
+        &panels,
+        3,
+        "deformation training shapes",
+        ColorRange::Auto,
+        &a.out.join("preview.png"),
+    )?;
+    undo.keep();
+    println!(
+        "wrote {} ({} training shapes, {} held out) in {:.1} s",
+        a.out.display(),
+        a.n,
+        a.reference,
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Runs `mfm dataset gmm`.
+fn dataset_gmm(a: GmmArgs) -> Result<()> {
+    let config = GmmConfig {
+        bumps: a.bumps,
+        sigma: a.sigma,
+        min_separation: a.min_separation,
+        distance: if a.euclidean {
+            GmmDistance::Euclidean
+        } else {
+            GmmDistance::Geodesic
+        },
+        ..GmmConfig::default()
+    };
+    config.validate()?;
+    if a.n == 0 {
+        bail!("--n must be at least 1");
+    }
+    ensure_empty(&a.out)?;
+    let (train_mesh, test_mesh, source) = match (&a.mesh, &a.test_mesh) {
+        (None, None) => {
+            let m = GmmMeshes::builtin()?;
+            (m.train, m.test, "builtin:blob".to_owned())
+        }
+        (Some(spec), None) => {
+            let m = GmmMeshes::from_base(load_mesh_checked(spec)?, Default::default())?;
+            (m.train, m.test, spec.clone())
+        }
+        (Some(spec), Some(test)) => (
+            load_mesh_checked(spec)?,
+            load_mesh_checked(test)?,
+            spec.clone(),
+        ),
+        (None, Some(_)) => bail!("--test-mesh needs --mesh (the training mesh)"),
+    };
+    println!(
+        "train mesh: {} vertices, {} faces; test mesh: {} vertices, {} faces",
+        train_mesh.num_vertices(),
+        train_mesh.num_faces(),
+        test_mesh.num_vertices(),
+        test_mesh.num_faces()
+    );
+    let progress = GenerateOptions {
+        progress_bar: true,
+        on_progress: None,
+    };
+    let frame = CanonicalFrame::of(&train_mesh)
+        .with_context(|| format!("placing the training mesh {source} in the canonical frame"))?;
+    let write = |dir: &Path, mesh: &TriMesh, n: usize, seed: u64, role: &str| -> Result<Dataset> {
+        let generator = GmmGenerator::new(mesh, &config)?;
+        let signals = generator.generate_with(n, seed, &progress)?;
+        let manifest = Manifest::new("gmm", config.manifest_params())
+            .with_seed(seed)
+            .with_provenance(format!("mfm dataset gmm: {role} set on {source}"))
+            .with_frame(frame);
+        Ok(Dataset::write(dir, mesh, &signals, manifest)?)
+    };
+    let undo = dataset_undo(
+        &a.out,
+        &["train", "reference", "test_mesh.ply", "preview.png"],
+    )?;
+    let t0 = std::time::Instant::now();
+    let train = write(&a.out.join("train"), &train_mesh, a.n, a.seed, "training")?;
+    // A different seed stream for the reference set: its signals are not
+    // copies of training signals on another mesh.
+    let reference_seed = a.seed ^ 0x5eed_0f2e_f5e7;
+    if a.reference > 0 {
+        write(
+            &a.out.join("reference"),
+            &test_mesh,
+            a.reference,
+            reference_seed,
+            "reference",
+        )?;
+    } else {
+        io::write_ply(a.out.join("test_mesh.ply"), &test_mesh, &[])?;
+    }
+    let preview = train.load_all()?;
+    let k = preview.len().min(8);
+    let values: Vec<Vec<f64>> = (0..k).map(|i| channel(&preview, i, 0)).collect();
+    let panels: Vec<Panel<'_>> = values
+        .iter()
+        .enumerate()
+        .map(|(i, v)| Panel::new(&train_mesh, Some(v.as_slice()), format!("signal {i}")))
+        .collect();
+    save_grid(
+        &panels,
+        4,
+        "GMM training signals",
+        ColorRange::Auto,
+        &a.out.join("preview.png"),
+    )?;
+    undo.keep();
+    println!(
+        "wrote {} ({} training signals, {} reference) in {:.1} s",
+        a.out.display(),
+        a.n,
+        a.reference,
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Creates the (empty or missing) dataset folder `out` and records it and
+/// the entries a `mfm dataset` command writes there for removal on failure.
+fn dataset_undo(out: &Path, entries: &[&str]) -> Result<mfm_files::Undo> {
+    let mut undo = mfm_files::Undo::new();
+    undo.create_dir_all(out)?;
+    for e in entries {
+        undo.file(out.join(e));
+    }
+    Ok(undo)
+}

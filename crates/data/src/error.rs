@@ -1,0 +1,90 @@
+//! The error type of every fallible entry point of the crate.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong reading or writing a dataset, generating
+/// signals, computing geodesics, metrics or sample-quality measures.
+///
+/// Variants that concern a file name it, so a user can tell which of their
+/// files is at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum DataError {
+    /// A file or folder could not be read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The underlying error.
+        source: std::io::Error,
+    },
+    /// A file exists but its contents are not what they should be
+    /// (truncated, corrupted, wrong shape, wrong version).
+    #[error("{}: {message}", path.display())]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// Two sizes that must agree do not.
+    #[error("size mismatch: {what} has {found}, expected {expected}")]
+    SizeMismatch {
+        /// What was measured.
+        what: String,
+        /// The size implied by the other inputs.
+        expected: usize,
+        /// The size found.
+        found: usize,
+    },
+    /// An invalid parameter or configuration value.
+    #[error("invalid configuration: {0}")]
+    Config(String),
+    /// A mesh could not be read.
+    #[error(transparent)]
+    ReadMesh(#[from] mfm_geometry::io::ReadError),
+    /// A mesh could not be written.
+    #[error(transparent)]
+    WriteMesh(#[from] mfm_geometry::io::WriteError),
+    /// A mesh could not be built or processed (procedural construction,
+    /// refinement, decimation), e.g. for an experiment's train/test meshes.
+    #[error("{what}: {source}")]
+    MeshProcessing {
+        /// The step that failed.
+        what: String,
+        /// The geometry crate's error.
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    /// The mesh operators could not be built.
+    #[error("mesh operators: {0}")]
+    Operators(#[from] mfm_geometry::operators::OperatorError),
+    /// A sparse factorization or solve failed.
+    #[error("solver: {0}")]
+    Solver(#[from] mfm_solver::SolverError),
+    /// Generating, fitting or projecting a deformation failed.
+    #[error("deformation: {0}")]
+    Deform(#[from] mfm_deform::DeformError),
+    /// Noise sampling failed.
+    #[error("noise: {0}")]
+    Noise(#[from] mfm_noise::NoiseError),
+}
+
+impl DataError {
+    /// An [`DataError::Io`] for `path`.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Self::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// An [`DataError::Format`] for `path`.
+    pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
+        Self::Format {
+            path: path.into(),
+            message: message.into(),
+        }
+    }
+}
+
+/// `Result` with [`DataError`].
+pub type Result<T, E = DataError> = std::result::Result<T, E>;
