@@ -6,6 +6,7 @@
 //! generators, metrics and quality measures live in the libtorch-free
 //! [`mfm_data`] crate and are re-exported here under their old paths.
 
+pub mod adam;
 pub mod checkpoint;
 pub mod config;
 pub mod error;
