@@ -101,10 +101,16 @@ pub enum KindName {
     Explicit,
 }
 
-/// Noise parameters shared by `mfm noise` and `mfm spectrum`.
+/// Noise parameters shared by `mfm noise` and `mfm spectrum`: the grammar
+/// of `mfm train --noise` (`--noise matern:100`), or the same spelled out
+/// (`--kind matern --tau 100`).
 #[derive(clap::Args, Clone, Debug)]
 pub struct KindArgs {
-    /// Noise kind.
+    /// Noise, as for `mfm train --noise`: matern[:TAU], matern-normalized:C,
+    /// white, naive, explicit:K[:TAU].
+    #[arg(long, conflicts_with_all = ["kind", "tau", "c", "k_noise"])]
+    pub noise: Option<NoiseKind>,
+    /// Noise kind (the long form of --noise; parameters from --tau, --c, --k-noise).
     #[arg(long, value_enum, default_value = "matern")]
     pub kind: KindName,
     /// Screening weight of matern and explicit (1/length^2; default 100; 0 = no screening).
@@ -122,6 +128,9 @@ impl KindArgs {
     /// The [`NoiseKind`] these flags describe; flags that the kind does not
     /// use are an error rather than silently ignored.
     pub fn to_kind(&self) -> Result<NoiseKind> {
+        if let Some(kind) = self.noise {
+            return Ok(kind);
+        }
         let unused = |flag: &str| -> Result<NoiseKind> {
             let name = clap::ValueEnum::to_possible_value(&self.kind)
                 .map(|v| v.get_name().to_owned())

@@ -302,6 +302,39 @@ fn noise_writes_npy_json_png_and_is_deterministic() {
     assert!(values.iter().any(|&x| x != 0.0));
     // same seed, same bits
     assert_eq!(values, read_npy(&b));
+    // `--noise matern:10`, the grammar of `mfm train --noise`, is the same noise
+    let c = dir.path().join("c.npy");
+    let o = mfm(&[
+        "noise",
+        "builtin:icosphere:2",
+        "--noise",
+        "matern:10",
+        "--samples",
+        "3",
+        "--channels",
+        "2",
+        "--seed",
+        "5",
+        "--out",
+        c.to_str().expect("utf8"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(values, read_npy(&c));
+    let o = mfm(&[
+        "noise",
+        "builtin:icosphere:1",
+        "--noise",
+        "white",
+        "--tau",
+        "3",
+        "--out",
+        c.to_str().expect("utf8"),
+    ]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("--tau"),
+        "{}",
+        stderr(&o)
+    );
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(a.with_extension("json")).expect("json"))
             .expect("json");
