@@ -1,6 +1,6 @@
-//! The check that `mfm` built without its `network` feature needs no
-//! libtorch: it is built (in the test profile, so only the cli crate itself
-//! compiles again after `cargo test`), its dynamic dependencies are listed
+//! `cargo xtask no-network`: the check that `mfm` built without its `network`
+//! feature needs no libtorch: it is built (in the test profile, so only the
+//! cli crate itself compiles again after `cargo test`), its dynamic dependencies are listed
 //! with `ldd`, and it runs `mfm info` with an empty environment, while
 //! `mfm train` says how to get the network commands.
 
