@@ -412,8 +412,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     while first < n {
         let count = chunk.min(n - first);
         let part = sampler.sample_on(&target, first, count, a.seed, &opts)?;
-        if let Some((i, vertex, channel, x)) =
-            InMemorySignals::new(part.data.clone(), count, v, c)?.first_non_finite()
+        if let Some((i, vertex, channel, x)) = mfm_data::signals::first_non_finite(&part.data, v, c)
         {
             bail!(
                 "sample {} is not finite ({x} at vertex {vertex}, channel {channel}): the model in {} diverged; nothing was written",

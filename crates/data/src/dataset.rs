@@ -409,18 +409,14 @@ impl Dataset {
                 *x = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
             }
         }
-        if let Some(k) = out.iter().position(|x| !x.is_finite()) {
-            let row = self.row_values();
-            let (signal, vertex, channel) = (
-                first + k / row,
-                (k % row) / self.channels,
-                k % self.channels,
-            );
+        if let Some((i, vertex, channel, x)) =
+            crate::signals::first_non_finite(out, self.vertices, self.channels)
+        {
             return Err(DataError::format(
                 &self.signals_path,
                 format!(
-                    "signal {signal}, vertex {vertex}, channel {channel} is {} (a dataset must hold finite values)",
-                    out[k]
+                    "signal {}, vertex {vertex}, channel {channel} is {x} (a dataset must hold finite values)",
+                    first + i
                 ),
             ));
         }

@@ -75,6 +75,20 @@ pub struct InMemorySignals {
     channels: usize,
 }
 
+/// The first NaN or infinite value of row-major `[N, vertices, channels]`
+/// values, as `(signal, vertex, channel, value)` in storage order; `None`
+/// when all are finite.
+pub fn first_non_finite(
+    values: &[f32],
+    vertices: usize,
+    channels: usize,
+) -> Option<(usize, usize, usize, f32)> {
+    let k = values.iter().position(|x| !x.is_finite())?;
+    let row = (vertices * channels).max(1);
+    let channels = channels.max(1);
+    Some((k / row, (k % row) / channels, k % channels, values[k]))
+}
+
 impl InMemorySignals {
     /// Wraps `data`, row-major `[len, vertices, channels]`.
     ///
@@ -104,14 +118,7 @@ impl InMemorySignals {
     /// channel, value)`, scanning in storage order; `None` when all are
     /// finite.
     pub fn first_non_finite(&self) -> Option<(usize, usize, usize, f32)> {
-        let k = self.data.iter().position(|x| !x.is_finite())?;
-        let row = self.vertices * self.channels;
-        Some((
-            k / row,
-            (k % row) / self.channels,
-            k % self.channels,
-            self.data[k],
-        ))
+        first_non_finite(&self.data, self.vertices, self.channels)
     }
 
     /// The values, row-major `[N, V, C]`.
