@@ -27,9 +27,9 @@ mod tables;
 
 use anyhow::{Context, Result, ensure};
 use clap::Args;
-use mfm_geometry::render::{View, save_png};
 use mfm_noise::NoiseKind;
-use mfm_noise::plots::{HistogramPanel, VarianceSeries, coefficient_histograms, variance_plot};
+use mfm_render::plots::{HistogramPanel, VarianceSeries, coefficient_histograms, variance_plot};
+use mfm_render::{View, save_png};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -394,7 +394,11 @@ pub fn run(config: &SpectralConfig, surface: &surfaces::Surface, out: &Path) -> 
     let series: Vec<VarianceSeries> = [matern.to_string(), NoiseKind::Naive.to_string()]
         .iter()
         .flat_map(|k| stats.iter().filter(move |s| &s.kind == k))
-        .map(|s| VarianceSeries::from_report(format!("{} {}", s.kind, s.mesh), &s.report))
+        .map(|s| {
+            let r = &s.report;
+            let label = format!("{} {}", s.kind, s.mesh);
+            VarianceSeries::new(label, &r.eigenvalues, &r.variance, r.theory.as_deref())
+        })
         .collect();
     variance_plot(
         out.join("spectrum_resolutions.png"),
@@ -441,15 +445,14 @@ pub fn run(config: &SpectralConfig, surface: &surfaces::Surface, out: &Path) -> 
         })
         .flatten()
         .map(|s| {
-            VarianceSeries::from_report(
-                format!(
-                    "{} {} [energy {}]",
-                    s.kind,
-                    s.mesh,
-                    pictures::sci(s.energy.mean)
-                ),
-                &s.report,
-            )
+            let r = &s.report;
+            let label = format!(
+                "{} {} [energy {}]",
+                s.kind,
+                s.mesh,
+                pictures::sci(s.energy.mean)
+            );
+            VarianceSeries::new(label, &r.eigenvalues, &r.variance, r.theory.as_deref())
         })
         .collect();
     variance_plot(

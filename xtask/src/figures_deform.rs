@@ -440,10 +440,10 @@ fn first_line(e: &anyhow::Error) -> String {
 
 /// Renders the meshes side by side (shaded, one camera for all).
 fn side_by_side(meshes: &[(String, PathBuf)], path: &Path) -> Result<()> {
-    use mfm_geometry::render::{GridOptions, Panel, render_grid, save_png};
+    use mfm_render::{GridOptions, Panel, render_grid, save_png};
     let loaded: Vec<(String, mfm_geometry::TriMesh)> = meshes
         .iter()
-        .map(|(name, p)| Ok((name.clone(), mfm_geometry::io::read_mesh(p)?)))
+        .map(|(name, p)| Ok((name.clone(), mfm_meshio::read_mesh(p)?)))
         .collect::<Result<_>>()?;
     let panels: Vec<Panel<'_>> = loaded
         .iter()

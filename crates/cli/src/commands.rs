@@ -4,7 +4,7 @@ use crate::mesh_arg::{load_mesh, load_mesh_checked, mesh_path};
 use crate::output::{prepare_outputs, write_json, write_matrix_market, write_npy};
 use anyhow::{Context, Result, bail};
 use clap::{Subcommand, ValueEnum};
-use mfm_geometry::{MeshReport, TriMesh, io, operators, render};
+use mfm_geometry::{MeshReport, TriMesh, operators};
 use std::path::PathBuf;
 
 /// Every `mfm` subcommand.
@@ -314,8 +314,8 @@ pub(crate) fn write_mesh(mesh: &TriMesh, out: &std::path::Path) -> Result<()> {
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
     match ext.as_deref() {
-        Some("obj") => io::write_obj(out, mesh)?,
-        Some("ply") => io::write_ply(out, mesh, &[])?,
+        Some("obj") => mfm_meshio::write_obj(out, mesh)?,
+        Some("ply") => mfm_meshio::write_ply(out, mesh, &[])?,
         _ => bail!("{}: output must end in .obj or .ply", out.display()),
     }
     Ok(())
@@ -343,14 +343,14 @@ fn render_png(
         (None, Some(path)) => Some(read_vertex_scalars(path, mesh.num_vertices())?),
         (None, None) => None,
     };
-    let opts = render::RenderOptions {
+    let opts = mfm_render::RenderOptions {
         width: size,
         height: size,
         colorbar: values.is_some(),
         ..Default::default()
     };
-    let img = render::render_mesh(&mesh, values.as_deref(), &opts)?;
-    render::save_png(&img, out)?;
+    let img = mfm_render::render_mesh(&mesh, values.as_deref(), &opts)?;
+    mfm_render::save_png(&img, out)?;
     undo.keep();
     println!("wrote {}", out.display());
     Ok(())

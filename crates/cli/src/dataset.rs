@@ -11,9 +11,9 @@ use mfm_data::dataset::{Dataset, Manifest};
 use mfm_data::deformations::{self, DeformMeshes};
 use mfm_data::experiment::GmmMeshes;
 use mfm_data::gmm::{GenerateOptions, GmmConfig, GmmDistance, GmmGenerator};
+use mfm_geometry::TriMesh;
 use mfm_geometry::frame::CanonicalFrame;
-use mfm_geometry::render::{ColorRange, Panel};
-use mfm_geometry::{TriMesh, io};
+use mfm_render::{ColorRange, Panel};
 use std::path::{Path, PathBuf};
 
 /// `mfm dataset ...`.
@@ -167,7 +167,7 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
             m.num_faces(),
             sizes.join(", ")
         );
-        io::write_ply(a.out.join(format!("{role}.ply")), m, &[])?;
+        mfm_meshio::write_ply(a.out.join(format!("{role}.ply")), m, &[])?;
     }
     write_json(&a.out.join("space.json"), &space)?;
     let norm = meshes.normalization;
@@ -322,7 +322,7 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
             "reference",
         )?;
     } else {
-        io::write_ply(a.out.join("test_mesh.ply"), &test_mesh, &[])?;
+        mfm_meshio::write_ply(a.out.join("test_mesh.ply"), &test_mesh, &[])?;
     }
     let preview = train.load_all()?;
     let k = preview.len().min(8);

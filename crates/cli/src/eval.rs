@@ -12,8 +12,8 @@ use mfm_data::gmm::{GmmConfig, GmmGenerator};
 use mfm_data::metrics::Metrics;
 use mfm_data::quality::{GmmQualityReport, ParamSpread, Quartiles};
 use mfm_data::{InMemorySignals, SignalSource};
-use mfm_geometry::render::{ColorRange, Colormap, Panel, RenderOptions};
-use mfm_geometry::{TriMesh, operators, render};
+use mfm_geometry::{TriMesh, operators};
+use mfm_render::{ColorRange, Colormap, Panel, RenderOptions};
 use std::path::{Path, PathBuf};
 
 /// Arguments of `mfm eval`.
@@ -170,8 +170,8 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         opts.colormap = Colormap::CoolWarm;
         opts.range = ColorRange::Symmetric;
         opts.colorbar = true;
-        let img = render::render_mesh(&mesh, Some(&diff), &opts)?;
-        render::save_png(&img, &diff_png)?;
+        let img = mfm_render::render_mesh(&mesh, Some(&diff), &opts)?;
+        mfm_render::save_png(&img, &diff_png)?;
     }
     undo.keep();
     Ok(())

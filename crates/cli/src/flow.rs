@@ -12,8 +12,8 @@ use mfm_fm::config::{DeviceChoice, OdeMethod, RunConfig};
 use mfm_fm::sample::{SampleOptions, Sampler};
 use mfm_fm::train::Trainer;
 use mfm_fm::{InMemorySignals, SignalSource};
-use mfm_geometry::render::{ColorRange, Panel};
-use mfm_geometry::{TriMesh, io};
+use mfm_geometry::TriMesh;
+use mfm_render::{ColorRange, Panel};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -430,13 +430,13 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     file.finish()?;
-    io::write_ply(a.out.join("mesh.ply"), &mesh, &[])?;
+    mfm_meshio::write_ply(a.out.join("mesh.ply"), &mesh, &[])?;
     let signals = InMemorySignals::new(kept, keep, v, c)?;
     for i in 0..plys {
         let path = a.out.join(format!("sample_{i:03}.ply"));
         if c == 3 {
             // Three channels are vertex positions: write the deformed mesh.
-            io::write_ply(&path, &mesh.with_positions(signals.positions(i))?, &[])?;
+            mfm_meshio::write_ply(&path, &mesh.with_positions(signals.positions(i))?, &[])?;
         } else {
             let columns: Vec<Vec<f64>> = (0..c).map(|k| channel(&signals, i, k)).collect();
             let names: Vec<String> = (0..c)
@@ -453,7 +453,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
                 .zip(&columns)
                 .map(|(name, col)| (name.as_str(), col.as_slice()))
                 .collect();
-            io::write_ply(&path, &mesh, &scalars)?;
+            mfm_meshio::write_ply(&path, &mesh, &scalars)?;
         }
     }
     let k = keep.min(8);

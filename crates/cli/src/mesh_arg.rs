@@ -2,7 +2,7 @@
 
 use anyhow::{Context, Result, bail};
 use mfm_geometry::validate::{MeshProblem, MeshReport};
-use mfm_geometry::{TriMesh, io, procedural};
+use mfm_geometry::{TriMesh, procedural};
 use std::path::Path;
 
 /// Names accepted after `builtin:`.
@@ -13,7 +13,7 @@ pub const BUILTINS: &[&str] = &["icosphere", "blob", "uv-sphere", "torus", "caps
 /// side for the grid, a resolution multiplier otherwise).
 pub fn load_mesh(spec: &str) -> Result<TriMesh> {
     let Some(rest) = spec.strip_prefix("builtin:") else {
-        return io::read_mesh(Path::new(spec)).map_err(anyhow::Error::from);
+        return mfm_meshio::read_mesh(Path::new(spec)).map_err(anyhow::Error::from);
     };
     let (name, param) = match rest.split_once(':') {
         Some((n, p)) => {

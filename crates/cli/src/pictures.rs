@@ -3,7 +3,7 @@
 
 use anyhow::Result;
 use mfm_data::{InMemorySignals, SignalSource};
-use mfm_geometry::render::{self, ColorRange, GridOptions, Panel};
+use mfm_render::{ColorRange, GridOptions, Panel};
 use std::path::Path;
 
 /// Channel `k` of signal `i` as f64.
@@ -29,7 +29,7 @@ pub(crate) fn save_grid(
     };
     opts.panel.range = range;
     opts.panel.colorbar = true;
-    let img = render::render_grid(panels, columns, &opts)?;
-    render::save_png(&img, path)?;
+    let img = mfm_render::render_grid(panels, columns, &opts)?;
+    mfm_render::save_png(&img, path)?;
     Ok(())
 }

@@ -6,12 +6,12 @@ use crate::output::{prepare_outputs, write_json, write_npy};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use mfm_geometry::operators::Operators;
-use mfm_geometry::render::{ColorRange, Colormap, RenderOptions, render_mesh, save_png};
-use mfm_noise::plots::{self, HistogramPanel, VarianceSeries};
 use mfm_noise::spectrum::compare;
 use mfm_noise::{
     DEFAULT_TAU, NoiseKind, NoiseSampler, SpectralAnalyzer, SpectrumComparison, SpectrumReport,
 };
+use mfm_render::plots::{self, HistogramPanel, VarianceSeries};
+use mfm_render::{ColorRange, Colormap, RenderOptions, render_mesh, save_png};
 use mfm_solver::{EigenOptions, generalized_eigenpairs};
 use std::path::Path;
 use std::time::Instant;
@@ -421,7 +421,12 @@ max |corr| = {:.3} (sampling level {:.3}); mean f^T M f = {:.4e}",
                 slot.push((spec.clone(), c.to_vec()));
             }
         }
-        series.push(VarianceSeries::from_report(spec.clone(), &report));
+        series.push(VarianceSeries::new(
+            spec.clone(),
+            &report.eigenvalues,
+            &report.variance,
+            report.theory.as_deref(),
+        ));
         meshes.push(MeshSpectrum {
             mesh: spec.clone(),
             vertices: v,

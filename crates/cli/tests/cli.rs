@@ -605,9 +605,7 @@ fn gmm_dataset_train_sample_eval_end_to_end() {
     let o = sample_into("samples", &["--ply", "2"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let (shape, samples) = read_npy_f32(&dir.path().join("samples/samples.npy"));
-    let test_v = mfm_geometry::io::read_mesh(&test_mesh)
-        .unwrap()
-        .num_vertices() as u64;
+    let test_v = mfm_meshio::read_mesh(&test_mesh).unwrap().num_vertices() as u64;
     assert_eq!(shape, vec![5, test_v, 1]);
     assert!(samples.iter().all(|x| x.is_finite()));
     assert!(dir.path().join("samples/sample_001.ply").is_file());
@@ -692,10 +690,10 @@ fn gmm_dataset_train_sample_eval_end_to_end() {
     assert!(dir.path().join("means_samples.png").is_file());
     // a sampling mesh of another size is flagged, naming both sizes
     let scaled = p("scaled.ply");
-    let big = mfm_geometry::io::read_mesh(&test_mesh)
+    let big = mfm_meshio::read_mesh(&test_mesh)
         .unwrap()
         .transformed(3.0, [0.0; 3]);
-    mfm_geometry::io::write_ply(&scaled, &big, &[]).unwrap();
+    mfm_meshio::write_ply(&scaled, &big, &[]).unwrap();
     let o = mfm(&[
         "sample",
         "--run",

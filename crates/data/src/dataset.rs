@@ -4,7 +4,7 @@
 //!
 //! | file | contents |
 //! |---|---|
-//! | [`MESH_FILE`] (`mesh.ply`) | the mesh, binary little-endian PLY with `double` coordinates (exact round trip; readable by [`mfm_geometry::io::read_mesh`], MeshLab, ParaView, PyVista) |
+//! | [`MESH_FILE`] (`mesh.ply`) | the mesh, binary little-endian PLY with `double` coordinates (exact round trip; readable by [`mfm_meshio::read_mesh`], MeshLab, ParaView, PyVista) |
 //! | [`SIGNALS_FILE`] (`signals.npy`) | the signals: NumPy `.npy`, dtype `<f4` (little-endian `f32`), C order, shape `[N, V, C]` (`V` the mesh's vertex count, `C` channels per vertex) |
 //! | [`MANIFEST_FILE`] (`manifest.json`) | a [`Manifest`]: format version, generator name and parameters, `N`/`V`/`C`, seed, the version of the tool that wrote it, free-form provenance |
 //!
@@ -49,7 +49,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use mfm_geometry::TriMesh;
 use mfm_geometry::frame::CanonicalFrame;
-use mfm_geometry::io::{read_mesh, write_ply};
+use mfm_meshio::{read_mesh, write_ply};
 use npyz::WriterBuilder;
 use serde::{Deserialize, Serialize};
 

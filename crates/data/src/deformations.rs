@@ -31,8 +31,8 @@ use std::path::Path;
 use indicatif::{ProgressBar, ProgressStyle};
 use mfm_deform::{Arap, DeformParams, DeformSpace, HandleSet, normalize_rest, project};
 use mfm_geometry::TriMesh;
-use mfm_geometry::decimate::decimate;
 use mfm_geometry::frame::CanonicalFrame;
+use mfm_processing::decimate::decimate;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -401,8 +401,8 @@ pub fn damaged_mesh(
     seed: u64,
 ) -> Result<TriMesh> {
     let handles = &space.handles;
-    use mfm_geometry::flips::{FlipAmount, random_edge_flips};
-    use mfm_geometry::holes::{HoleMetric, largest_component, punch_holes};
+    use mfm_processing::flips::{FlipAmount, random_edge_flips};
+    use mfm_processing::holes::{HoleMetric, largest_component, punch_holes};
     use rand::{Rng, SeedableRng};
     let diag = mesh.bounding_box_diagonal();
     let hole_radius = match damage {
@@ -449,8 +449,8 @@ pub fn damaged_mesh(
 /// centre, of radius 20% of the diagonal, or less so that it stops short of
 /// every handle region; the largest component is kept.
 fn partial_mesh(mesh: &TriMesh, handles: &HandleSet) -> Result<TriMesh> {
-    use mfm_geometry::holes::{HoleMetric, largest_component, punch_holes};
     use mfm_geometry::mesh::{norm, sub};
+    use mfm_processing::holes::{HoleMetric, largest_component, punch_holes};
     let clearance = |p: [f64; 3]| {
         handles
             .iter()

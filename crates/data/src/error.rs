@@ -41,10 +41,10 @@ pub enum DataError {
     Config(String),
     /// A mesh could not be read.
     #[error(transparent)]
-    ReadMesh(#[from] mfm_geometry::io::ReadError),
+    ReadMesh(#[from] mfm_meshio::ReadError),
     /// A mesh could not be written.
     #[error(transparent)]
-    WriteMesh(#[from] mfm_geometry::io::WriteError),
+    WriteMesh(#[from] mfm_meshio::WriteError),
     /// A mesh could not be built or processed (procedural construction,
     /// refinement, decimation), e.g. for an experiment's train/test meshes.
     #[error("{what}: {source}")]

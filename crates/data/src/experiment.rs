@@ -6,12 +6,12 @@
 //! a different vertex density. The paper coarsens the left half of the
 //! bunny; here the default is to **refine** it ([`HalfDensity::Refine`]):
 //! refinement by longest-edge bisection
-//! ([`mfm_geometry::refine::refine_region`]) inserts edge midpoints only, so
+//! ([`mfm_processing::refine::refine_region`]) inserts edge midpoints only, so
 //! the test mesh is *exactly* the same piecewise-linear surface as the
 //! training mesh (same area, same volume, same positions for every original
 //! vertex), and only the triangulation differs. [`HalfDensity::Coarsen`]
 //! follows the paper instead (quadric-error decimation restricted to the
-//! half, [`mfm_geometry::decimate::decimate`]); it moves the surface slightly
+//! half, [`mfm_processing::decimate::decimate`]); it moves the surface slightly
 //! (the area typically changes by well under a percent on smooth meshes).
 //!
 //! "Half" is the part of the surface with `x` below the area-weighted
@@ -28,10 +28,10 @@
 //! ```
 
 use mfm_geometry::TriMesh;
-use mfm_geometry::decimate::decimate;
 use mfm_geometry::operators::face_areas;
 use mfm_geometry::procedural;
-use mfm_geometry::refine::{RefineCriterion, refine_region};
+use mfm_processing::decimate::decimate;
+use mfm_processing::refine::{RefineCriterion, refine_region};
 
 use crate::error::{DataError, Result};
 

@@ -11,8 +11,8 @@ use mfm_data::geodesic::HeatGeodesics;
 use mfm_data::gmm::{GENERATOR_NAME, GmmConfig, GmmDistance, GmmGenerator, generate};
 use mfm_data::{DataError, InMemorySignals, SignalSource};
 use mfm_geometry::operators::lumped_mass;
-use mfm_geometry::refine::{RefineCriterion, refine_region};
 use mfm_geometry::{TriMesh, procedural};
+use mfm_processing::refine::{RefineCriterion, refine_region};
 use npyz::WriterBuilder;
 
 // ---------------------------------------------------------------- datasets

@@ -21,7 +21,8 @@
 use std::time::Instant;
 
 use mfm_deform::{Arap, DeformSpace, HandleSet, normalize_rest};
-use mfm_geometry::{decimate, io, operators, subdivide};
+use mfm_geometry::{operators, subdivide};
+use mfm_processing::decimate;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -37,7 +38,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let samples: usize = args.get(3).map_or(Ok(3), |s| s.parse())?;
     println!("threads: {}", rayon::current_num_threads());
 
-    let (rest, _, _) = normalize_rest(&io::read_mesh(&path)?)?;
+    let (rest, _, _) = normalize_rest(&mfm_meshio::read_mesh(&path)?)?;
     let handles = HandleSet::auto(&rest, count, mfm_deform::DEFAULT_RADIUS_FRACTION)?;
     println!(
         "{path}: {} vertices, {} faces",

@@ -1,6 +1,6 @@
 //! The error type shared by every fallible entry point of the crate.
 
-use mfm_geometry::holes::HoleError;
+use mfm_processing::holes::HoleError;
 use mfm_solver::SolverError;
 use thiserror::Error;
 

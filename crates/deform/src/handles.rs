@@ -31,9 +31,9 @@
 //! assert!(regions.iter().all(|r| !r.is_empty()));
 //! ```
 
-use mfm_geometry::holes::edge_path_distances;
 use mfm_geometry::mesh::{norm, sub};
 use mfm_geometry::{TriMesh, operators};
+use mfm_processing::holes::edge_path_distances;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{DeformError, Result};

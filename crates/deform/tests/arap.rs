@@ -7,8 +7,8 @@ mod common;
 use common::{max_diff, space_on, unit_blob};
 use mfm_deform::rigid::{axis_angle_to_matrix, mat_vec};
 use mfm_deform::{Arap, ArapOptions, DeformError, DeformParams, Handle, HandleSet, RigidParams};
-use mfm_geometry::holes::{HoleMetric, punch_holes};
 use mfm_geometry::{Topology, TriMesh, procedural};
+use mfm_processing::holes::{HoleMetric, punch_holes};
 use proptest::prelude::*;
 
 #[test]

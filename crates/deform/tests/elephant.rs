@@ -4,15 +4,16 @@
 #![allow(clippy::unwrap_used)]
 
 use mfm_deform::{Arap, DeformSpace, HandleSet, normalize_rest, project};
-use mfm_geometry::holes::edge_path_distances;
-use mfm_geometry::{decimate, io, test_support};
+use mfm_geometry::test_support;
+use mfm_processing::decimate;
+use mfm_processing::holes::edge_path_distances;
 
 #[test]
 fn auto_handles_on_the_elephant_sit_at_the_tips() {
     let Some(path) = test_support::shared_mesh("elephant.obj") else {
         return;
     };
-    let (rest, scale, shift) = normalize_rest(&io::read_mesh(&path).unwrap()).unwrap();
+    let (rest, scale, shift) = normalize_rest(&mfm_meshio::read_mesh(&path).unwrap()).unwrap();
     let handles = HandleSet::auto(&rest, 5, mfm_deform::DEFAULT_RADIUS_FRACTION).unwrap();
     let regions = handles.regions(&rest).unwrap();
     for (i, r) in regions.iter().enumerate() {
@@ -40,7 +41,7 @@ fn auto_handles_on_the_elephant_sit_at_the_tips() {
     }
     // the same handles on the coarse training mesh (original decimated,
     // normalized with the original's transform)
-    let coarse = decimate::decimate(&io::read_mesh(&path).unwrap(), 3000, None)
+    let coarse = decimate::decimate(&mfm_meshio::read_mesh(&path).unwrap(), 3000, None)
         .unwrap()
         .mesh
         .transformed(scale, shift);

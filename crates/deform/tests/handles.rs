@@ -5,9 +5,9 @@ mod common;
 
 use common::unit_blob;
 use mfm_deform::{DeformError, Handle, HandleSet};
-use mfm_geometry::holes::edge_path_distances;
 use mfm_geometry::mesh::{norm, sub};
 use mfm_geometry::{operators, subdivide};
+use mfm_processing::holes::edge_path_distances;
 
 #[test]
 fn auto_places_the_anchor_at_the_centroid_and_handles_far_along_the_surface() {

@@ -16,6 +16,8 @@
 //! - [`npy`]: reading `.npy` arrays (shape checked against the file's length
 //!   before anything is allocated) and writing them, also in streamed
 //!   batches for outputs larger than memory.
+//! - [`text`]: [`fmt_f64`], how every number mfm writes as text is formatted
+//!   (shortest digits that parse back to the same bits).
 //!
 //! Nothing here depends on meshes or networks; every mfm crate that writes
 //! files uses it.
@@ -25,9 +27,11 @@ pub mod error;
 pub mod guard;
 pub mod npy;
 pub mod space;
+pub mod text;
 pub mod undo;
 
 pub use atomic::{AtomicFile, write_atomic};
 pub use error::FileError;
 pub use guard::Outputs;
+pub use text::fmt_f64;
 pub use undo::Undo;

@@ -11,11 +11,11 @@ use std::hint::black_box;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use mfm_geometry::operators::{self, Operators};
 use mfm_geometry::test_support::shared_mesh;
-use mfm_geometry::{TriMesh, io, procedural};
+use mfm_geometry::{TriMesh, procedural};
 
 fn meshes() -> Vec<(String, TriMesh)> {
     let mut out = Vec::new();
-    match shared_mesh("bunny.off").map(io::read_mesh) {
+    match shared_mesh("bunny.off").map(mfm_meshio::read_mesh) {
         Some(Ok(bunny)) => out.push(("bunny".to_owned(), bunny)),
         Some(Err(e)) => eprintln!("SKIPPED: bunny.off: {e}"),
         None => {}

@@ -11,14 +11,14 @@
 //! `--runs` runs (after one warm-up run) is printed per operator, in
 //! milliseconds, with the fastest run (`min_ms`, less sensitive to other load
 //! on the machine). `xtask/python/bench_operators.py` prints the same for libigl.
-//! Meshes are read with `mfm_geometry::io::read_mesh` (OBJ, OFF, PLY, glTF).
+//! Meshes are read with `mfm_meshio::read_mesh` (OBJ, OFF, PLY, glTF).
 
 use std::error::Error;
 use std::path::Path;
 use std::time::Instant;
 
 use mfm_geometry::operators::{self, Operators};
-use mfm_geometry::{TriMesh, io, subdivide};
+use mfm_geometry::{TriMesh, subdivide};
 
 type Res<T> = Result<T, Box<dyn Error>>;
 
@@ -65,7 +65,7 @@ fn main() -> Res<()> {
     println!("  \"results\": [");
     let mut first = true;
     for path in &paths {
-        let mut mesh = io::read_mesh(path).map_err(|e| format!("{path}: {e}"))?;
+        let mut mesh = mfm_meshio::read_mesh(path).map_err(|e| format!("{path}: {e}"))?;
         let mut level = 0;
         for &target in &levels {
             while level < target {

@@ -1,10 +1,12 @@
 //! # mfm-geometry
 //!
-//! Triangle meshes for triangulation-agnostic learning: reading and writing
-//! mesh files, validation with a readable [`MeshReport`], the intrinsic
-//! operators every other mfm crate is built on, mesh processing used by the
-//! experiments (subdivision, local refinement, decimation, edge flips, holes),
-//! and a small software renderer for PNG pictures.
+//! The mesh core of mfm: the triangle mesh type, its topology, validation
+//! with a readable [`MeshReport`], the intrinsic operators every other mfm
+//! crate is built on, the canonical frame, procedural meshes and uniform
+//! subdivision. Mesh files are read and written by `mfm-meshio`, remeshing
+//! (refinement, decimation, edge flips, holes) is `mfm-processing`, and
+//! pictures are `mfm-render`; this crate has no file-format, image or font
+//! dependency.
 //!
 //! ## Conventions
 //! - A mesh is `V x 3` `f64` positions and `F x 3` `u32` counter-clockwise faces.
@@ -27,16 +29,10 @@
 //! assert!((m.iter().sum::<f64>() - mesh.total_area()).abs() < 1e-12);
 //! ```
 
-pub mod decimate;
-pub mod flips;
 pub mod frame;
-pub mod holes;
-pub mod io;
 pub mod mesh;
 pub mod operators;
 pub mod procedural;
-pub mod refine;
-pub mod render;
 pub mod subdivide;
 #[doc(hidden)]
 pub mod test_support;

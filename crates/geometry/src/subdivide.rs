@@ -49,7 +49,7 @@ pub struct SubdivisionMap {
 impl SubdivisionMap {
     /// Builds a map; every parent index must be smaller than its child's
     /// index (`num_coarse_vertices + i`) for [`Self::prolong`] to be meaningful.
-    pub(crate) fn new(num_coarse_vertices: usize, parents: Vec<[u32; 2]>) -> Self {
+    pub fn new(num_coarse_vertices: usize, parents: Vec<[u32; 2]>) -> Self {
         debug_assert!(
             parents
                 .iter()

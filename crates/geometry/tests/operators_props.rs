@@ -10,7 +10,7 @@ use std::collections::HashMap;
 use faer::sparse::SparseColMat;
 use mfm_geometry::operators::{self, Operators};
 use mfm_geometry::test_support::shared_mesh;
-use mfm_geometry::{Topology, TriMesh, io, mesh, procedural};
+use mfm_geometry::{Topology, TriMesh, mesh, procedural};
 use proptest::prelude::*;
 
 type Sparse = SparseColMat<usize, f64>;
@@ -34,7 +34,8 @@ fn shared_meshes() -> Vec<(&'static str, TriMesh)> {
         .iter()
         .filter_map(|name| {
             let path = shared_mesh(name)?;
-            let mesh = io::read_mesh(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            let mesh =
+                mfm_meshio::read_mesh(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
             Some((*name, mesh))
         })
         .collect()

@@ -2,16 +2,18 @@
 //! numbers of the shared meshes, libigl as an oracle for the measurements, a
 //! brute-force oracle for random triangle soups, and the repairs.
 
+// the mesh strategies and bad-file fixtures shared with the mesh I/O tests
+#[path = "../../meshio/tests/io_support/mod.rs"]
 mod io_support;
 
 use io_support::{bad_fixture, coordinate, triangle};
 use mfm_geometry::validate::{self, MeshProblem, MeshReport, repair};
-use mfm_geometry::{TriMesh, io, procedural, test_support};
+use mfm_geometry::{TriMesh, procedural, test_support};
 use proptest::prelude::*;
 use std::collections::{BTreeMap, BTreeSet};
 
 fn report_of(name: &str) -> MeshReport {
-    MeshReport::new(&io::read_mesh(bad_fixture(name)).expect("fixture reads"))
+    MeshReport::new(&mfm_meshio::read_mesh(bad_fixture(name)).expect("fixture reads"))
 }
 
 #[test]
@@ -83,7 +85,7 @@ fn each_problem_fixture_reports_its_problem() {
         "inconsistent_orientation.off",
         "duplicate_faces.off",
     ] {
-        let mesh = io::read_mesh(bad_fixture(name)).expect("reads");
+        let mesh = mfm_meshio::read_mesh(bad_fixture(name)).expect("reads");
         let err = validate::validate(&mesh).expect_err(name);
         assert_eq!(err.problems, MeshReport::new(&mesh).problems);
         assert!(err.to_string().starts_with("the mesh is not valid: "));
@@ -478,7 +480,7 @@ proptest! {
 fn shared_meshes_have_the_documented_topology() {
     let check = |name: &str, f: &dyn Fn(&MeshReport)| {
         if let Some(path) = test_support::shared_mesh(name) {
-            let r = MeshReport::new(&io::read_mesh(&path).expect("reads"));
+            let r = MeshReport::new(&mfm_meshio::read_mesh(&path).expect("reads"));
             f(&r);
         }
     };
@@ -562,7 +564,7 @@ for p in sys.argv[1:]:
                     .expect("number")
             })
             .collect();
-        let r = MeshReport::new(&io::read_mesh(path).expect("reads"));
+        let r = MeshReport::new(&mfm_meshio::read_mesh(path).expect("reads"));
         let name = path.display();
         assert_eq!(
             [

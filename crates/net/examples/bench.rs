@@ -10,7 +10,7 @@
 //! `--profile`, the time per section.
 #![allow(clippy::unwrap_used)]
 
-use mfm_geometry::{io, procedural, test_support};
+use mfm_geometry::{procedural, test_support};
 use mfm_net::PoissonNetConfig;
 use mfm_net::bench::{BenchOptions, bench_training_step};
 
@@ -40,9 +40,9 @@ fn main() {
         }
     }
     let mesh = match mesh_path {
-        Some(p) => io::read_mesh(&p).unwrap(),
+        Some(p) => mfm_meshio::read_mesh(&p).unwrap(),
         None => match test_support::shared_mesh("bunny.off") {
-            Some(p) => io::read_mesh(p).unwrap(),
+            Some(p) => mfm_meshio::read_mesh(p).unwrap(),
             None => procedural::icosphere(4),
         },
     };

@@ -12,7 +12,7 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
-use mfm_geometry::{TriMesh, io, procedural};
+use mfm_geometry::{TriMesh, procedural};
 use mfm_noise::{NoiseKind, NoiseSampler};
 
 fn meshes() -> Vec<(String, TriMesh)> {
@@ -22,7 +22,7 @@ fn meshes() -> Vec<(String, TriMesh)> {
     }
     let bunny =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/meshes/bunny.off");
-    match io::read_mesh(&bunny) {
+    match mfm_meshio::read_mesh(&bunny) {
         Ok(m) => out.push(("bunny".to_owned(), m)),
         Err(e) => eprintln!("bunny not available ({e}); skipping it"),
     }

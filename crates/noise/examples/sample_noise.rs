@@ -17,9 +17,9 @@
 use std::process::ExitCode;
 use std::time::Instant;
 
-use mfm_geometry::render::{ColorRange, Colormap, RenderOptions, render_mesh, save_png};
-use mfm_geometry::{TriMesh, io, procedural};
+use mfm_geometry::{TriMesh, procedural};
 use mfm_noise::{NoiseKind, NoiseSampler};
+use mfm_render::{ColorRange, Colormap, RenderOptions, render_mesh, save_png};
 
 struct Args {
     mesh: Option<String>,
@@ -78,7 +78,7 @@ fn parse() -> Result<Args, String> {
 fn run() -> Result<(), String> {
     let args = parse()?;
     let mesh: TriMesh = match &args.mesh {
-        Some(p) => io::read_mesh(p).map_err(|e| e.to_string())?,
+        Some(p) => mfm_meshio::read_mesh(p).map_err(|e| e.to_string())?,
         None => procedural::icosphere(5),
     };
     let name = args.mesh.as_deref().unwrap_or("icosphere(5)");
@@ -147,7 +147,7 @@ fn run() -> Result<(), String> {
         .iter()
         .map(|(n, v)| (n.as_str(), v.as_slice()))
         .collect();
-    io::write_ply(&args.out, &mesh, &refs).map_err(|e| e.to_string())?;
+    mfm_meshio::write_ply(&args.out, &mesh, &refs).map_err(|e| e.to_string())?;
     println!("wrote {} ({} scalar fields)", args.out, refs.len());
 
     if let (Some(png), Some((_, first))) = (&args.png, scalars.first()) {

@@ -7,7 +7,7 @@
 //!     [--runs 3] [--batch 64] [--tau 100] MESH [MESH ...]
 //! ```
 //!
-//! For every mesh (OBJ/OFF/PLY/glTF, read with `mfm_geometry::io::read_mesh`)
+//! For every mesh (OBJ/OFF/PLY/glTF, read with `mfm_meshio::read_mesh`)
 //! the median wall time of `--runs` runs, after one warm-up run, in
 //! milliseconds (`min_ms`: the fastest run):
 //!
@@ -29,8 +29,8 @@ use std::error::Error;
 use std::time::Instant;
 
 use faer::Mat;
-use mfm_geometry::io;
 use mfm_geometry::operators::Operators;
+use mfm_meshio as io;
 use mfm_noise::{NoiseKind, NoiseSampler};
 use mfm_solver::ScreenedPoisson;
 

@@ -1,7 +1,5 @@
 //! The error type of every fallible entry point of the crate.
 
-use std::path::PathBuf;
-
 use mfm_geometry::operators::OperatorError;
 use mfm_solver::SolverError;
 use thiserror::Error;
@@ -73,15 +71,6 @@ pub enum NoiseError {
         vertices: usize,
         /// Channels requested.
         channels: usize,
-    },
-
-    /// A plot could not be drawn or written.
-    #[error("cannot write plot {path}: {message}")]
-    Plot {
-        /// The output file.
-        path: PathBuf,
-        /// What failed.
-        message: String,
     },
 }
 

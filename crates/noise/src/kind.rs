@@ -3,7 +3,7 @@
 use std::fmt;
 use std::str::FromStr;
 
-use mfm_geometry::io::fmt_f64;
+use mfm_files::fmt_f64;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{NoiseError, Result};

@@ -5,7 +5,7 @@
 //! screening, `tau = 0`, as a pseudo-inverse), its scale-normalized
 //! variant, discrete white noise, naive per-vertex noise and an explicit
 //! truncated-spectrum sampler, plus spectral diagnostics that measure the
-//! paper's three properties and PNG plots of them.
+//! paper's three properties (their plots are drawn by `mfm_render::plots`).
 //!
 //! - [`NoiseKind`]: which noise (serde, and a short `matern:100` text form).
 //! - [`NoiseSampler`]: built once per mesh (operators, Cholesky factor of
@@ -16,7 +16,6 @@
 //! - [`spectrum`]: coefficients `c_i = phi_i^T M f`, empirical against
 //!   theoretical `Var(c_i)`, independence, per-frequency W2 between meshes,
 //!   energy; a serializable [`SpectrumReport`].
-//! - [`plots`]: variance-vs-eigenvalue (log-log) and coefficient histograms.
 //!
 //! ## Conventions
 //! - `L` is the PSD cotangent Laplacian, `M` the lumped mass (positive at
@@ -46,7 +45,6 @@
 
 pub mod error;
 pub mod kind;
-pub mod plots;
 mod rng;
 pub mod sampler;
 pub mod spectrum;

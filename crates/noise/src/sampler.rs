@@ -59,8 +59,8 @@
 
 use faer::MatMut;
 use faer::sparse::SparseColMat;
+use mfm_files::fmt_f64;
 use mfm_geometry::TriMesh;
-use mfm_geometry::io::fmt_f64;
 use mfm_geometry::operators::{Operators, try_gamma};
 use mfm_solver::{EigenOptions, Eigenpairs, ScreenedPoisson, generalized_eigenpairs};
 use rayon::prelude::*;

@@ -24,10 +24,10 @@
 
 mod common;
 
-use mfm_geometry::refine::{RefineCriterion, refine_region};
 use mfm_geometry::{TriMesh, subdivide};
 use mfm_noise::spectrum::{self, SpectrumComparison};
 use mfm_noise::{NoiseKind, NoiseSampler, SpectrumReport};
+use mfm_processing::refine::{RefineCriterion, refine_region};
 
 const SAMPLES: usize = 3000;
 const FREQUENCIES: usize = 32;

@@ -1,6 +1,6 @@
 //! The sampler against its defining equations (one sample at a time, with
 //! independent arithmetic), the parsing and serialization of kinds, the
-//! spectral tools on signals with known coefficients, the plots, and the
+//! spectral tools on signals with known coefficients, and the
 //! error paths.
 #![allow(clippy::unwrap_used, clippy::needless_range_loop)]
 
@@ -9,7 +9,6 @@ mod common;
 use faer::sparse::SparseColMat;
 use mfm_geometry::TriMesh;
 use mfm_geometry::operators::Operators;
-use mfm_noise::plots::{HistogramPanel, VarianceSeries, coefficient_histograms, variance_plot};
 use mfm_noise::spectrum::{self, SpectralAnalyzer};
 use mfm_noise::{NoiseBatch, NoiseError, NoiseKind, NoiseSampler, SpectrumReport};
 use proptest::prelude::*;
@@ -188,76 +187,6 @@ fn naive_theory_is_phi_m2_phi_and_white_is_one() {
         spectrum::theoretical_variance(NoiseKind::MaternNormalized { c: 0.5 }, &pairs, &mass, g)
             .unwrap();
     assert!((nm[2] - g / (pairs.values[2] + 1.5).powi(2)).abs() < 1e-15);
-}
-
-#[test]
-fn plots_are_written() {
-    let mesh = common::blob(2);
-    let (mass, pairs) = common::eigen(&mesh, 30);
-    let dir = tempfile::tempdir().unwrap();
-    let mut series = Vec::new();
-    let mut panels = vec![
-        HistogramPanel {
-            title: "c_2".into(),
-            series: vec![],
-            bins: 30,
-        },
-        HistogramPanel {
-            title: "c_20".into(),
-            series: vec![],
-            bins: 30,
-        },
-    ];
-    for (j, kind) in [NoiseKind::Matern { tau: 10.0 }, NoiseKind::White]
-        .into_iter()
-        .enumerate()
-    {
-        let s = NoiseSampler::new(&mesh, kind).unwrap();
-        let th = s.theory(&pairs).unwrap();
-        let mut an = SpectralAnalyzer::new(&pairs, &mass).unwrap().keep(&[2, 20]);
-        an.add(&s.sample(300, 1, j as u64).unwrap()).unwrap();
-        series.push(VarianceSeries::from_report(
-            kind.to_string(),
-            &an.report(Some(&th)).unwrap(),
-        ));
-        panels[0]
-            .series
-            .push((kind.to_string(), an.coefficients(2).unwrap().to_vec()));
-        panels[1]
-            .series
-            .push((kind.to_string(), an.coefficients(20).unwrap().to_vec()));
-    }
-    let p1 = dir.path().join("variance.png");
-    variance_plot(&p1, "Var(c_i)", &series).unwrap();
-    let img = image::open(&p1).unwrap().to_rgb8();
-    assert_eq!(img.dimensions(), mfm_noise::plots::VARIANCE_PLOT_SIZE);
-    // the first two palette colours (the two series) are both drawn
-    let has = |img: &image::RgbImage, rgb: [u8; 3]| img.pixels().any(|p| p.0 == rgb);
-    assert!(has(&img, [31, 119, 180]) && has(&img, [214, 39, 40]));
-    // and black text/axes
-    assert!(img.pixels().filter(|p| p.0 == [0, 0, 0]).count() > 500);
-
-    let p2 = dir.path().join("hist.png");
-    coefficient_histograms(&p2, &panels).unwrap();
-    let img = image::open(&p2).unwrap().to_rgb8();
-    let (w, h) = mfm_noise::plots::HISTOGRAM_PANEL_SIZE;
-    assert_eq!(img.dimensions(), (2 * w, h));
-    assert!(has(&img, [31, 119, 180]) && has(&img, [214, 39, 40]));
-
-    assert!(matches!(
-        coefficient_histograms(&p2, &[]),
-        Err(NoiseError::Plot { .. })
-    ));
-    let bad = VarianceSeries {
-        label: "x".into(),
-        eigenvalues: vec![1.0],
-        variance: vec![],
-        theory: None,
-    };
-    assert!(matches!(
-        variance_plot(&p1, "t", &[bad]),
-        Err(NoiseError::Plot { .. })
-    ));
 }
 
 #[test]

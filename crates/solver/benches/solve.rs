@@ -12,14 +12,14 @@ use std::time::Duration;
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use faer::Mat;
-use mfm_geometry::{TriMesh, io, operators, procedural};
+use mfm_geometry::{TriMesh, operators, procedural};
 use mfm_solver::ScreenedPoisson;
 
 fn meshes() -> Vec<(String, TriMesh)> {
     let bunny =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/meshes/bunny.off");
     let mut out = Vec::new();
-    match io::read_mesh(&bunny) {
+    match mfm_meshio::read_mesh(&bunny) {
         Ok(m) => out.push(("bunny".to_owned(), m)),
         Err(e) => eprintln!("bunny not available ({e}); using icosphere(5)"),
     }

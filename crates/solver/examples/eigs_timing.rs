@@ -18,7 +18,7 @@ mod common;
 use std::time::Instant;
 
 use faer::sparse::SparseColMat;
-use mfm_geometry::{io, operators, procedural, subdivide};
+use mfm_geometry::{operators, procedural, subdivide};
 use mfm_solver::{EigenMethod, EigenOptions, generalized_eigenpairs};
 
 fn load(spec: &str) -> (SparseColMat<usize, f64>, Vec<f64>) {
@@ -39,7 +39,7 @@ fn load(spec: &str) -> (SparseColMat<usize, f64>, Vec<f64>) {
             Some((p, t)) => (p, t.parse::<usize>().expect("subdivision count")),
             None => (spec, 0),
         };
-        let mut mesh = io::read_mesh(path).expect("readable mesh");
+        let mut mesh = mfm_meshio::read_mesh(path).expect("readable mesh");
         for _ in 0..times {
             mesh = subdivide::loop_subdivision(&mesh).expect("subdivision");
         }

@@ -12,7 +12,7 @@
 use std::time::Instant;
 
 use faer::Mat;
-use mfm_geometry::{TriMesh, io, operators, procedural, subdivide};
+use mfm_geometry::{TriMesh, operators, procedural, subdivide};
 use mfm_solver::ScreenedPoisson;
 
 fn load(spec: &str) -> TriMesh {
@@ -23,7 +23,7 @@ fn load(spec: &str) -> TriMesh {
         Some((p, t)) => (p, t.parse::<usize>().expect("subdivision count")),
         None => (spec, 0),
     };
-    let mut mesh = io::read_mesh(path).expect("readable mesh");
+    let mut mesh = mfm_meshio::read_mesh(path).expect("readable mesh");
     for _ in 0..times {
         mesh = subdivide::loop_subdivision(&mesh).expect("subdivision");
     }

@@ -4,11 +4,11 @@
 use anyhow::{Context, Result};
 use image::{Rgb, RgbImage};
 use mfm_geometry::TriMesh;
-use mfm_geometry::render::{
+use mfm_noise::{NoiseKind, NoiseSampler};
+use mfm_render::{
     ColorRange, Colormap, GridOptions, Panel, RenderOptions, View, Wireframe, draw_text,
     render_grid, render_mesh, text_height, text_width,
 };
-use mfm_noise::{NoiseKind, NoiseSampler};
 use serde::Serialize;
 
 const WHITE: Rgb<u8> = Rgb([255, 255, 255]);

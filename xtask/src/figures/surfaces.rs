@@ -3,8 +3,9 @@
 //! spectrum, and non-uniform triangulations.
 
 use anyhow::{Context, Result};
-use mfm_geometry::refine::{RefineCriterion, refine_region};
-use mfm_geometry::{TriMesh, decimate, io, procedural, subdivide};
+use mfm_geometry::{TriMesh, procedural, subdivide};
+use mfm_processing::decimate;
+use mfm_processing::refine::{RefineCriterion, refine_region};
 use std::path::{Path, PathBuf};
 
 /// The surface the figures are drawn on.
@@ -63,7 +64,8 @@ pub fn load(path: Option<&Path>, root: &Path) -> Result<Surface> {
     };
     let (name, mesh) = match path {
         Some(p) => {
-            let mesh = io::read_mesh(&p).with_context(|| format!("cannot read {}", p.display()))?;
+            let mesh = mfm_meshio::read_mesh(&p)
+                .with_context(|| format!("cannot read {}", p.display()))?;
             let name = p
                 .file_name()
                 .map(|n| n.to_string_lossy().into_owned())

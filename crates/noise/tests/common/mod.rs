@@ -2,7 +2,7 @@
 #![allow(dead_code, clippy::unwrap_used)]
 
 use mfm_geometry::operators::Operators;
-use mfm_geometry::{TriMesh, io, procedural, test_support};
+use mfm_geometry::{TriMesh, procedural, test_support};
 use mfm_solver::{EigenOptions, Eigenpairs, generalized_eigenpairs};
 
 /// A smooth, asymmetric closed surface: the icosphere with `level`
@@ -30,7 +30,7 @@ pub fn blob(level: u32) -> TriMesh {
 /// The shared Stanford bunny (3485 vertices), or `None` (with a printed skip
 /// reason) when the shared meshes are not there.
 pub fn bunny() -> Option<TriMesh> {
-    test_support::shared_mesh("bunny.off").map(|p| io::read_mesh(p).unwrap())
+    test_support::shared_mesh("bunny.off").map(|p| mfm_meshio::read_mesh(p).unwrap())
 }
 
 /// Lumped mass and the `k` smallest eigenpairs of `mesh`.
