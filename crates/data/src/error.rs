@@ -57,6 +57,9 @@ pub enum DataError {
     /// The mesh operators could not be built.
     #[error("mesh operators: {0}")]
     Operators(#[from] mfm_geometry::operators::OperatorError),
+    /// Heat geodesics could not be set up or solved.
+    #[error("geodesics: {0}")]
+    Geodesic(#[from] mfm_geometry::geodesic::GeodesicError),
     /// A sparse factorization or solve failed.
     #[error("solver: {0}")]
     Solver(#[from] mfm_solver::SolverError),

@@ -64,8 +64,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{DataError, Result};
-use crate::geodesic::HeatGeodesics;
 use crate::signals::InMemorySignals;
+use mfm_geometry::geodesic::HeatGeodesics;
 
 /// Name of this generator in dataset manifests.
 pub const GENERATOR_NAME: &str = "gmm";
@@ -247,8 +247,8 @@ impl GmmGenerator {
     /// distance) factors the heat-method operators of `mesh`.
     ///
     /// # Errors
-    /// [`GmmConfig::validate`]'s errors; [`DataError::Operators`] or
-    /// [`DataError::Solver`] from [`HeatGeodesics::with_time_factor`];
+    /// [`GmmConfig::validate`]'s errors; [`DataError::Geodesic`] from
+    /// [`HeatGeodesics::with_time_factor`];
     /// [`DataError::Config`] if the mesh has no area.
     pub fn new(mesh: &TriMesh, config: &GmmConfig) -> Result<Self> {
         config.validate()?;

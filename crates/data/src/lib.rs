@@ -2,8 +2,8 @@
 //!
 //! The data side of flow matching on meshes, without libtorch: datasets of
 //! signals over one mesh (folder format, streaming reads, validation), the
-//! GMM and deformation generators and their experiment meshes, heat-method
-//! geodesics, the distribution metrics (MMD, COV, 1-NNA, test error) and the
+//! GMM and deformation generators and their experiment meshes, the
+//! distribution metrics (MMD, COV, 1-NNA, test error) and the
 //! sample-quality measures that a flat, noisy or collapsed sample set cannot
 //! pass. `mfm-fm` trains and samples on top of it; `mfm` built without its
 //! network feature uses this crate alone.
@@ -12,7 +12,6 @@ pub mod dataset;
 pub mod deformations;
 pub mod error;
 pub mod experiment;
-pub mod geodesic;
 pub mod gmm;
 pub mod metrics;
 pub mod quality;

@@ -7,9 +7,9 @@ use std::path::Path;
 
 use mfm_data::dataset::{Dataset, MANIFEST_FILE, MESH_FILE, Manifest, SIGNALS_FILE, WriteOptions};
 use mfm_data::experiment::{GmmMeshes, HalfDensity, split_x};
-use mfm_data::geodesic::HeatGeodesics;
 use mfm_data::gmm::{GENERATOR_NAME, GmmConfig, GmmDistance, GmmGenerator, generate};
 use mfm_data::{DataError, InMemorySignals, SignalSource};
+use mfm_geometry::geodesic::HeatGeodesics;
 use mfm_geometry::operators::lumped_mass;
 use mfm_geometry::{TriMesh, procedural};
 use mfm_processing::refine::{RefineCriterion, refine_region};

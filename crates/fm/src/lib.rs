@@ -15,6 +15,6 @@ pub mod train;
 
 pub use error::{FmError, Result};
 pub use mfm_data::{
-    DataError, InMemorySignals, SignalSource, dataset, deformations, experiment, geodesic, gmm,
-    metrics, quality, signals,
+    DataError, InMemorySignals, SignalSource, dataset, deformations, experiment, gmm, metrics,
+    quality, signals,
 };

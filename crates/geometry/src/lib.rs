@@ -2,11 +2,12 @@
 //!
 //! The mesh core of mfm: the triangle mesh type, its topology, validation
 //! with a readable [`MeshReport`], the intrinsic operators every other mfm
-//! crate is built on, the canonical frame, procedural meshes and uniform
+//! crate is built on, heat-method geodesic distances, the canonical frame, procedural meshes and uniform
 //! subdivision. Mesh files are read and written by `mfm-meshio`, remeshing
 //! (refinement, decimation, edge flips, holes) is `mfm-processing`, and
 //! pictures are `mfm-render`; this crate has no file-format, image or font
-//! dependency.
+//! dependency. Its only mfm dependency is `mfm-solver` (sparse Cholesky), with
+//! which [`geodesic::HeatGeodesics`] factors its two systems.
 //!
 //! ## Conventions
 //! - A mesh is `V x 3` `f64` positions and `F x 3` `u32` counter-clockwise faces.
@@ -30,6 +31,7 @@
 //! ```
 
 pub mod frame;
+pub mod geodesic;
 pub mod mesh;
 pub mod operators;
 pub mod procedural;

@@ -520,4 +520,3 @@ fn set_diagonals(r: Range<usize>, l_ptr: &[usize], rows: &[usize], vals: &mut [f
         }
     }
 }
-

@@ -2,7 +2,7 @@
 //! Wardetzky, "Geodesics in Heat", 2013), written from its three equations.
 //!
 //! For a source vertex `s`, with the mesh operators of
-//! [`mfm_geometry::operators`] (`L` the positive semi-definite cotangent
+//! [`crate::operators`] (`L` the positive semi-definite cotangent
 //! Laplacian, `M` the lumped mass, `G` the `2F x V` intrinsic gradient in
 //! per-face orthonormal frames, `A2` the face areas interleaved twice):
 //!
@@ -36,7 +36,7 @@
 //!
 //! # Example
 //! ```
-//! use mfm_data::geodesic::HeatGeodesics;
+//! use mfm_geometry::geodesic::HeatGeodesics;
 //! use mfm_geometry::procedural;
 //! let sphere = procedural::icosphere(3);
 //! let geo = HeatGeodesics::new(&sphere).unwrap();
@@ -55,11 +55,37 @@
 
 use faer::Mat;
 use faer::sparse::SparseColMat;
-use mfm_geometry::operators::Operators;
-use mfm_geometry::{Topology, TriMesh};
-use mfm_solver::{LaplacianSolver, ScreenedPoisson};
+use mfm_solver::{LaplacianSolver, ScreenedPoisson, SolverError};
+use thiserror::Error;
 
-use crate::error::{DataError, Result};
+use crate::operators::{OperatorError, Operators};
+use crate::{Topology, TriMesh};
+
+/// Why heat geodesics could not be set up or solved.
+#[derive(Debug, Error)]
+pub enum GeodesicError {
+    /// The mesh operators could not be built (a degenerate face).
+    #[error("mesh operators: {0}")]
+    Operators(#[from] OperatorError),
+    /// A sparse factorization or solve failed.
+    #[error("solver: {0}")]
+    Solver(#[from] SolverError),
+    /// A parameter or a property of the mesh is out of range.
+    #[error("{0}")]
+    Invalid(String),
+    /// A source is not a vertex of the mesh.
+    #[error(
+        "geodesic source vertex {source_vertex} is not a vertex of a mesh with {vertices} vertices"
+    )]
+    SourceOutOfRange {
+        /// The source asked for.
+        source_vertex: usize,
+        /// Number of vertices of the mesh.
+        vertices: usize,
+    },
+}
+
+type Result<T> = std::result::Result<T, GeodesicError>;
 
 /// Factored heat-method operators of one mesh, answering distance queries
 /// from any number of source vertices (see the [module docs](self)).
@@ -84,8 +110,8 @@ impl HeatGeodesics {
     /// Cost: two sparse Cholesky factorizations of `V x V` mesh matrices.
     ///
     /// # Errors
-    /// [`DataError::Operators`] for a mesh with degenerate faces,
-    /// [`DataError::Solver`] if a factorization fails (e.g. a vertex no face
+    /// [`GeodesicError::Operators`] for a mesh with degenerate faces,
+    /// [`GeodesicError::Solver`] if a factorization fails (e.g. a vertex no face
     /// uses has zero mass).
     pub fn new(mesh: &TriMesh) -> Result<Self> {
         Self::with_time_factor(mesh, 1.0)
@@ -95,18 +121,18 @@ impl HeatGeodesics {
     /// give smoother, less accurate distances (useful on noisy meshes).
     ///
     /// # Errors
-    /// As [`HeatGeodesics::new`], plus [`DataError::Config`] unless
+    /// As [`HeatGeodesics::new`], plus [`GeodesicError::Invalid`] unless
     /// `time_factor` is finite and positive.
     pub fn with_time_factor(mesh: &TriMesh, time_factor: f64) -> Result<Self> {
         if !(time_factor.is_finite() && time_factor > 0.0) {
-            return Err(DataError::Config(format!(
+            return Err(GeodesicError::Invalid(format!(
                 "the heat-method time factor must be finite and > 0, found {time_factor}"
             )));
         }
         let ops = Operators::new(mesh)?;
         let h = mean_edge_length(mesh);
         if !(h.is_finite() && h > 0.0) {
-            return Err(DataError::Config(format!(
+            return Err(GeodesicError::Invalid(format!(
                 "the mesh's mean edge length must be finite and > 0, found {h}"
             )));
         }
@@ -142,8 +168,8 @@ impl HeatGeodesics {
     /// 0 at the source, never negative).
     ///
     /// # Errors
-    /// [`DataError::SizeMismatch`] if `source` is not a vertex;
-    /// [`DataError::Solver`] if a solve fails.
+    /// [`GeodesicError::SourceOutOfRange`] if `source` is not a vertex;
+    /// [`GeodesicError::Solver`] if a solve fails.
     pub fn distance(&self, source: usize) -> Result<Vec<f64>> {
         let mut all = self.distances(&[source])?;
         Ok(all.pop().unwrap_or_default())
@@ -157,10 +183,9 @@ impl HeatGeodesics {
     pub fn distances(&self, sources: &[usize]) -> Result<Vec<Vec<f64>>> {
         let n = self.num_vertices();
         if let Some(&bad) = sources.iter().find(|&&s| s >= n) {
-            return Err(DataError::SizeMismatch {
-                what: "geodesic source vertex index".into(),
-                expected: n,
-                found: bad,
+            return Err(GeodesicError::SourceOutOfRange {
+                source_vertex: bad,
+                vertices: n,
             });
         }
         let k = sources.len();
@@ -255,7 +280,7 @@ pub fn mean_edge_length(mesh: &TriMesh) -> f64 {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use mfm_geometry::procedural;
+    use crate::procedural;
 
     fn great_circle(a: [f64; 3], b: [f64; 3]) -> f64 {
         let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
@@ -329,7 +354,7 @@ mod tests {
         }
         assert!(matches!(
             geo.distance(sphere.num_vertices()),
-            Err(DataError::SizeMismatch { .. })
+            Err(GeodesicError::SourceOutOfRange { .. })
         ));
         assert!(HeatGeodesics::with_time_factor(&sphere, 0.0).is_err());
     }
