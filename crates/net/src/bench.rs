@@ -144,14 +144,14 @@ impl BenchReport {
     }
 
     /// With [`BenchOptions::profile`]: wall seconds per step spent inside the
-    /// dense layers' autograd nodes, forward and backward ([`crate::dense`]'s
+    /// dense layers' autograd nodes, forward and backward ([`crate::kernels::dense`]'s
     /// `linear` and `complex_linear` sections: the products and the bias
     /// and sum passes around them); `None` without a profile or when no
     /// dense layer ran on the CPU.
     pub fn profiled_product_seconds(&self) -> Option<f64> {
         let dense_node = |section: &str| {
             section.strip_prefix("fn:").is_some_and(|node| {
-                crate::dense::NODE_NAMES.contains(&node.strip_suffix("^T").unwrap_or(node))
+                crate::kernels::dense::NODE_NAMES.contains(&node.strip_suffix("^T").unwrap_or(node))
             })
         };
         let total: f64 = self

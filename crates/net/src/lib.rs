@@ -46,12 +46,12 @@
 //! then by elementwise work on the face features, then by the sparse solves.
 //! What this crate does about it:
 //! - complex layers at least 64 channels wide take three real products
-//!   instead of four (Gauss's form, [`dense::complex_linear`]), forward and
+//!   instead of four (Gauss's form, [`kernels::dense::complex_linear`]), forward and
 //!   in both backward products: the paper step's dense work drops to ~444
 //!   GFLOP;
 //! - a block's last complex layer runs after the divergence, on vertices:
 //!   `div(W g) = div(g) Wr^T + div(i g) Wi^T`
-//!   ([`model::ComplexLinear::forward_divergence`], with both divergences in
+//!   ([`layers::ComplexLinear::forward_divergence`], with both divergences in
 //!   one pass, [`MeshTensors::paired_divergence`]): one `[V, 2W] x [2W, W]`
 //!   product instead of three `[F, W] x [W, W]` ones, ~392 GFLOP per paper
 //!   step;
@@ -60,7 +60,7 @@
 //!   before the solve (exact, see [`model`]), ~379 GFLOP per paper step
 //!   ([`PoissonNetConfig::forward_product_flops`] is the cost model; a test
 //!   checks it against the products the layers run,
-//!   [`dense::counted_product_flops`]);
+//!   [`kernels::dense::counted_product_flops`]);
 //! - dense layers use faer's GEMM ([`dense`]), ~15-25% faster per core than
 //!   the MKL inside the torch wheel on the AMD benchmark machine;
 //! - the modulation and the magnitude nonlinearity are single-pass fused
@@ -108,10 +108,9 @@
 pub mod autograd;
 pub mod bench;
 pub mod config;
-pub mod dense;
 pub mod error;
-mod fastmath;
-pub mod fused;
+pub mod kernels;
+pub mod layers;
 pub mod loss;
 pub mod mesh;
 pub mod model;

@@ -6,7 +6,7 @@ mod common;
 
 use common::{check_directional, check_parameters, randn, rel_max_diff};
 use mfm_geometry::procedural;
-use mfm_net::model::{PoissonBlock, VectorMlp};
+use mfm_net::layers::{PoissonBlock, VectorMlp};
 use mfm_net::{HeadKind, MeshTensors, NetError, PoissonNet, PoissonNetConfig};
 use tch::{Device, Kind, Tensor, nn};
 

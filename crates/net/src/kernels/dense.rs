@@ -25,6 +25,7 @@ use faer::{Accum, MatMut, MatRef, Par};
 use std::sync::atomic::{AtomicU64, Ordering};
 use tch::{Device, Kind, Tensor};
 
+use super::{Scalar, SyncPtr};
 use crate::autograd::{CustomFunction, apply_custom, parallel_for};
 use crate::error::{Result, backward_before_forward, shape_error};
 
@@ -54,20 +55,6 @@ fn count_products(multiply_adds: usize) {
     PRODUCT_FLOPS.fetch_add(2 * multiply_adds as u64, Ordering::Relaxed);
 }
 
-#[derive(Clone, Copy)]
-struct Ptr<T>(*mut T);
-
-impl<T> Ptr<T> {
-    /// The pointer (a method, so closures capture the `Sync` wrapper).
-    fn get(self) -> *mut T {
-        self.0
-    }
-}
-// SAFETY: workers write disjoint row blocks (or their own partial buffers).
-unsafe impl<T> Send for Ptr<T> {}
-// SAFETY: as above.
-unsafe impl<T> Sync for Ptr<T> {}
-
 /// Row blocks `[start, end)` of `n` rows, one per intra-op thread (at least
 /// 256 rows each).
 fn blocks(n: usize) -> Vec<(usize, usize)> {
@@ -81,10 +68,10 @@ fn blocks(n: usize) -> Vec<(usize, usize)> {
 
 /// `C[n, o] = A[n, k] B[k, o]` (row-major, contiguous), `C` overwritten;
 /// `b_transposed`: `B` is given as `B^T [o, k]`.
-fn gemm_rows<T: Real>(
+fn gemm_rows<T: Scalar>(
     a: &[T],
     b: &[T],
-    c: Ptr<T>,
+    c: SyncPtr<T>,
     n: usize,
     k: usize,
     o: usize,
@@ -141,10 +128,10 @@ unsafe fn slice<T>(t: &Tensor) -> &[T] {
     unsafe { std::slice::from_raw_parts(t.data_ptr() as *const T, t.numel()) }
 }
 
-fn forward_kind<T: Real>(x: &Tensor, w: &Tensor, out: &Tensor, n: usize, k: usize, o: usize) {
+fn forward_kind<T: Scalar>(x: &Tensor, w: &Tensor, out: &Tensor, n: usize, k: usize, o: usize) {
     // SAFETY: contiguous CPU tensors of type T.
     let (xs, ws) = unsafe { (slice::<T>(x), slice::<T>(w)) };
-    gemm_rows(xs, ws, Ptr(out.data_ptr() as *mut T), n, k, o, true);
+    gemm_rows(xs, ws, SyncPtr(out.data_ptr() as *mut T), n, k, o, true);
 }
 
 /// `(dX = G W, dW = G^T X)` of `Y = X W^T` for contiguous CPU tensors of
@@ -158,7 +145,7 @@ fn backward_kind<T>(
     o: usize,
 ) -> (Tensor, Tensor)
 where
-    T: Real + tch::kind::Element,
+    T: Scalar + tch::kind::Element,
 {
     let grad_x = Tensor::empty(x.size().as_slice(), (x.kind(), Device::Cpu));
     // `dX = G W` with `W` handed to faer column-major (`W^T` row-major):
@@ -167,7 +154,7 @@ where
     // SAFETY: contiguous CPU tensors of type T.
     let (xs, wts, gs) = unsafe { (slice::<T>(x), slice::<T>(&wt), slice::<T>(g)) };
     crate::profile::timed("linear.dx", || {
-        gemm_rows(gs, wts, Ptr(grad_x.data_ptr() as *mut T), n, o, k, true)
+        gemm_rows(gs, wts, SyncPtr(grad_x.data_ptr() as *mut T), n, o, k, true)
     });
     let _s =
         crate::profile::enabled().then(|| crate::profile::section(format!("linear.dw {o}x{k}")));
@@ -280,31 +267,6 @@ pub fn linear(x: &Tensor, weight: &Tensor, bias: Option<&Tensor>) -> Result<Tens
     Ok(out.remove(0))
 }
 
-/// The real element types of the complex products (`f32`, `f64`).
-trait Real:
-    faer::traits::ComplexField<Canonical = Self>
-    + Copy
-    + Send
-    + Sync
-    + std::ops::Add<Output = Self>
-    + std::ops::Sub<Output = Self>
-    + std::ops::AddAssign
-    + 'static
-{
-}
-
-impl<T> Real for T where
-    T: faer::traits::ComplexField<Canonical = T>
-        + Copy
-        + Send
-        + Sync
-        + std::ops::Add<Output = T>
-        + std::ops::Sub<Output = T>
-        + std::ops::AddAssign
-        + 'static
-{
-}
-
 /// Writes `f(re, im)` of each of the `rows` complex rows of `src` (rows
 /// `[re (k) | im (k)]`) to `dst` (rows of `k`).
 fn combine_parts<T: Copy>(src: &[T], k: usize, dst: &mut [T], f: impl Fn(T, T) -> T) {
@@ -346,9 +308,9 @@ struct ComplexFactors<'a, T> {
 /// real products instead of four, `t1 = Xr A`, `t2 = Xi B`,
 /// `t3 = (Xr + Xi)(A + B)`, `Yr = t1 - t2`, `Yi = t3 - t1 - t2`, chunk by chunk so the
 /// temporaries stay in cache; rows are split over libtorch's intra-op threads.
-fn complex_rows_product<T>(x: &[T], m: &ComplexFactors<'_, T>, y: Ptr<T>, n: usize)
+fn complex_rows_product<T>(x: &[T], m: &ComplexFactors<'_, T>, y: SyncPtr<T>, n: usize)
 where
-    T: Real,
+    T: Scalar,
 {
     let (k, o) = (m.re.nrows(), m.re.ncols());
     let bl = blocks(n);
@@ -412,12 +374,12 @@ const WEIGHT_GRADIENT_BLOCK: usize = 4096;
 /// order at the end. Returns `[2, o, k]` row-major.
 fn complex_weight_gradient<T>(x: &[T], gy: &[T], n: usize, k: usize, o: usize) -> Vec<T>
 where
-    T: Real,
+    T: Scalar,
 {
     let blocks = n.div_ceil(WEIGHT_GRADIENT_BLOCK);
     let chunk = complex_chunk(k.max(o));
     let mut partials = vec![T::zero_impl(); blocks * 3 * o * k];
-    let pp = Ptr(partials.as_mut_ptr());
+    let pp = SyncPtr(partials.as_mut_ptr());
     parallel_for(blocks, 1, &|begin, end| {
         let mut xd = vec![T::zero_impl(); chunk * k];
         let mut gs = vec![T::zero_impl(); chunk * o];
@@ -475,10 +437,10 @@ where
 /// rows, summed over fixed blocks of [`WEIGHT_GRADIENT_BLOCK`] rows (in
 /// parallel, then added in order, so the result does not depend on the
 /// thread count).
-fn weight_gradient<T: Real>(x: &[T], gy: &[T], n: usize, k: usize, o: usize) -> Vec<T> {
+fn weight_gradient<T: Scalar>(x: &[T], gy: &[T], n: usize, k: usize, o: usize) -> Vec<T> {
     let blocks = n.div_ceil(WEIGHT_GRADIENT_BLOCK);
     let mut partials = vec![T::zero_impl(); blocks * o * k];
-    let pp = Ptr(partials.as_mut_ptr());
+    let pp = SyncPtr(partials.as_mut_ptr());
     parallel_for(blocks, 1, &|begin, end| {
         for b in begin..end {
             // SAFETY: block b owns its o k partial values.
@@ -517,7 +479,7 @@ fn complex_dims(z: &Tensor, w: &Tensor) -> (usize, usize, usize) {
 
 fn complex_forward_kind<T>(z: &Tensor, w: &Tensor, out: &Tensor, n: usize, k: usize, o: usize)
 where
-    T: Real,
+    T: Scalar,
 {
     // `y = z W^T`: A = Wr^T, B = Wi^T, A + B = (Wr + Wi)^T, all [k, o]
     let sum = (w.get(0) + w.get(1)).contiguous();
@@ -528,7 +490,7 @@ where
         im: MatRef::from_row_major_slice(&ws[o * k..], o, k).transpose(),
         sum: MatRef::from_row_major_slice(ss, o, k).transpose(),
     };
-    complex_rows_product(zs, &m, Ptr(out.data_ptr() as *mut T), n);
+    complex_rows_product(zs, &m, SyncPtr(out.data_ptr() as *mut T), n);
 }
 
 fn complex_backward_kind<T>(
@@ -540,7 +502,7 @@ fn complex_backward_kind<T>(
     o: usize,
 ) -> (Tensor, Tensor)
 where
-    T: Real + tch::kind::Element,
+    T: Scalar + tch::kind::Element,
 {
     // `dz = dy conj(W)`: A = Wr, B = -Wi, A + B = Wr - Wi, all [o, k], each
     // handed to faer column-major (stored transposed, row-major), which its
@@ -566,7 +528,7 @@ where
         sum: MatRef::from_row_major_slice(ds, k, o).transpose(),
     };
     crate::profile::timed("complex.dz", || {
-        complex_rows_product(gs, &m, Ptr(grad_z.data_ptr() as *mut T), n)
+        complex_rows_product(gs, &m, SyncPtr(grad_z.data_ptr() as *mut T), n)
     });
     let gw = crate::profile::timed("complex.dw", || complex_weight_gradient(zs, gs, n, k, o));
     let grad_w = Tensor::from_slice(&gw).reshape([2, o as i64, k as i64]);

@@ -18,6 +18,7 @@
 
 use tch::{Device, Kind, Tensor};
 
+use super::{Scalar, SyncPtr};
 use crate::autograd::{CustomFunction, apply_custom, parallel_for};
 use crate::error::{NetError, Result, backward_before_forward, shape_error};
 
@@ -30,59 +31,6 @@ pub const SCALE_EPS: f64 = 1e-8;
 /// Rows of faces handled per parallel task.
 const GRAIN: usize = 64;
 
-trait Float:
-    Copy
-    + Send
-    + Sync
-    + Default
-    + std::ops::Mul<Output = Self>
-    + std::ops::Add<Output = Self>
-    + std::ops::Sub<Output = Self>
-    + std::ops::Div<Output = Self>
-    + std::ops::Neg<Output = Self>
-    + 'static
-{
-    fn from_f64(x: f64) -> Self;
-    fn sqrt(self) -> Self;
-}
-
-impl Float for f32 {
-    fn from_f64(x: f64) -> Self {
-        x as f32
-    }
-    fn sqrt(self) -> Self {
-        f32::sqrt(self)
-    }
-}
-
-impl Float for f64 {
-    fn from_f64(x: f64) -> Self {
-        x
-    }
-    fn sqrt(self) -> Self {
-        f64::sqrt(self)
-    }
-}
-
-#[derive(Clone, Copy)]
-struct Ptr<T>(*mut T);
-// SAFETY: kernels write disjoint rows from `parallel_for` chunks.
-unsafe impl<T> Send for Ptr<T> {}
-// SAFETY: as above.
-unsafe impl<T> Sync for Ptr<T> {}
-
-impl<T> Ptr<T> {
-    /// Row `i` of width `w`.
-    ///
-    /// # Safety
-    /// The row must be in bounds and not aliased by another live slice.
-    #[allow(clippy::mut_from_ref)]
-    unsafe fn row(&self, i: usize, w: usize) -> &mut [T] {
-        // SAFETY: guaranteed by the caller.
-        unsafe { std::slice::from_raw_parts_mut(self.0.add(i * w), w) }
-    }
-}
-
 /// A contiguous CPU tensor's data as a slice.
 ///
 /// # Safety
@@ -93,8 +41,8 @@ unsafe fn data<T>(t: &Tensor) -> &[T] {
     unsafe { std::slice::from_raw_parts(t.data_ptr() as *const T, t.numel()) }
 }
 
-fn ptr<T>(t: &Tensor) -> Ptr<T> {
-    Ptr(t.data_ptr() as *mut T)
+fn ptr<T>(t: &Tensor) -> SyncPtr<T> {
+    SyncPtr(t.data_ptr() as *mut T)
 }
 
 /// Splits `[B, 2F, C]` into (rows = B F, C).
@@ -152,7 +100,7 @@ struct ModulateSaved {
     raw: Tensor,
 }
 
-fn modulate_forward<T: Float>(g: &Tensor, s: &ModulateSaved, out: &Tensor, n: usize, c: usize) {
+fn modulate_forward<T: Scalar>(g: &Tensor, s: &ModulateSaved, out: &Tensor, n: usize, c: usize) {
     // SAFETY: contiguous CPU tensors of type T made by the caller; `out` is
     // only written through disjoint rows.
     let (gs, cs, sn, sp) = unsafe {
@@ -186,7 +134,7 @@ fn modulate_forward<T: Float>(g: &Tensor, s: &ModulateSaved, out: &Tensor, n: us
     });
 }
 
-fn modulate_backward<T: Float>(
+fn modulate_backward<T: Scalar>(
     grad: &Tensor,
     s: &ModulateSaved,
     sig: &Tensor,
@@ -348,7 +296,7 @@ struct MagnitudeSaved {
     ratio: Tensor,
 }
 
-fn magnitude<T: Float>(g: &Tensor, mag: &Tensor, n: usize, c: usize) {
+fn magnitude<T: Scalar>(g: &Tensor, mag: &Tensor, n: usize, c: usize) {
     // SAFETY: contiguous CPU tensors of type T; `mag` written by disjoint rows.
     let gs = unsafe { data::<T>(g) };
     let m = ptr::<T>(mag);
@@ -362,14 +310,14 @@ fn magnitude<T: Float>(g: &Tensor, mag: &Tensor, n: usize, c: usize) {
             // SAFETY: row i belongs to this chunk.
             let out = unsafe { m.row(i, c) };
             for k in 0..c {
-                out[k] = (re[k] * re[k] + im[k] * im[k] + eps).sqrt();
+                out[k] = (re[k] * re[k] + im[k] * im[k] + eps).square_root();
             }
         }
     });
 }
 
 /// `out = g * ratio` (ratio broadcast over the two components).
-fn scale_rows<T: Float>(g: &Tensor, ratio: &Tensor, out: &Tensor, n: usize, c: usize) {
+fn scale_rows<T: Scalar>(g: &Tensor, ratio: &Tensor, out: &Tensor, n: usize, c: usize) {
     // SAFETY: as in `magnitude`.
     let (gs, rs) = unsafe { (data::<T>(g), data::<T>(ratio)) };
     let o = ptr::<T>(out);
@@ -390,7 +338,7 @@ fn scale_rows<T: Float>(g: &Tensor, ratio: &Tensor, out: &Tensor, n: usize, c: u
 
 /// First backward pass: `s = (dout . z) / |z|` per face and channel (the
 /// derivative with respect to `a = GELU(|z| + b)`).
-fn project<T: Float>(grad: &Tensor, s: &MagnitudeSaved, out: &Tensor, n: usize, c: usize) {
+fn project<T: Scalar>(grad: &Tensor, s: &MagnitudeSaved, out: &Tensor, n: usize, c: usize) {
     // SAFETY: as in `magnitude`.
     let (gr, gs, ms) = unsafe { (data::<T>(grad), data::<T>(&s.g), data::<T>(&s.mag)) };
     let o = ptr::<T>(out);
@@ -416,7 +364,7 @@ fn project<T: Float>(grad: &Tensor, s: &MagnitudeSaved, out: &Tensor, n: usize, 
 
 /// Second backward pass: `dz = dout * ratio + (dpre - s * ratio) z / |z|`,
 /// where `dpre` is the gradient reaching `|z|` through the GELU.
-fn combine<T: Float>(
+fn combine<T: Scalar>(
     grad: &Tensor,
     s: &MagnitudeSaved,
     sproj: &Tensor,
@@ -538,11 +486,11 @@ pub fn magnitude_gelu(g: &Tensor, bias: &Tensor) -> Result<Tensor> {
 //
 // For f32 (the training type) each operation is one pass forward and one
 // backward, with the transcendental functions evaluated in the kernel by the
-// vectorizable approximations of `crate::fastmath` (the loops compile twice,
+// vectorizable approximations of `super::fastmath` (the loops compile twice,
 // with and without AVX2, chosen at run time). Nothing but the inputs is saved
 // for the backward pass, which recomputes the rest.
 
-use crate::fastmath::{self, Fused, MulAdd, Separate};
+use super::fastmath::{self, Fused, MulAdd, Separate};
 
 /// Defines `$name::<M>` (the kernel, generic over how the polynomials
 /// multiply-add) and `$avx`, the kernel compiled for AVX2 and FMA with fused
@@ -584,7 +532,7 @@ macro_rules! simd_call {
     }};
 }
 
-simd_kernel!(mod32_fwd_rows, mod32_fwd_rows_avx2, (gs: &[f32], pss: &[f32], o: Ptr<f32>, begin: usize, end: usize, c: usize), {
+simd_kernel!(mod32_fwd_rows, mod32_fwd_rows_avx2, (gs: &[f32], pss: &[f32], o: SyncPtr<f32>, begin: usize, end: usize, c: usize), {
     let eps = SCALE_EPS as f32;
     for i in begin..end {
         let (re, im) = (&gs[2 * i * c..(2 * i + 1) * c], &gs[(2 * i + 1) * c..(2 * i + 2) * c]);
@@ -603,7 +551,7 @@ simd_kernel!(mod32_fwd_rows, mod32_fwd_rows_avx2, (gs: &[f32], pss: &[f32], o: P
     }
 });
 
-simd_kernel!(mod32_bwd_rows, mod32_bwd_rows_avx2, (gr: &[f32], gs: &[f32], pss: &[f32], og: Ptr<f32>, op: Ptr<f32>, begin: usize, end: usize, c: usize), {
+simd_kernel!(mod32_bwd_rows, mod32_bwd_rows_avx2, (gr: &[f32], gs: &[f32], pss: &[f32], og: SyncPtr<f32>, op: SyncPtr<f32>, begin: usize, end: usize, c: usize), {
     let eps = SCALE_EPS as f32;
     for i in begin..end {
         let (lo, mid, hi) = (2 * i * c, (2 * i + 1) * c, (2 * i + 2) * c);
@@ -682,7 +630,7 @@ impl CustomFunction for Modulate32 {
     }
 }
 
-simd_kernel!(mag32_fwd_rows, mag32_fwd_rows_avx2, (gs: &[f32], bias: &[f32], o: Ptr<f32>, begin: usize, end: usize, c: usize), {
+simd_kernel!(mag32_fwd_rows, mag32_fwd_rows_avx2, (gs: &[f32], bias: &[f32], o: SyncPtr<f32>, begin: usize, end: usize, c: usize), {
     let eps = MAGNITUDE_EPS as f32;
     for i in begin..end {
         let (re, im) = (&gs[2 * i * c..(2 * i + 1) * c], &gs[(2 * i + 1) * c..(2 * i + 2) * c]);
@@ -698,7 +646,7 @@ simd_kernel!(mag32_fwd_rows, mag32_fwd_rows_avx2, (gs: &[f32], bias: &[f32], o: 
     }
 });
 
-simd_kernel!(mag32_bwd_rows, mag32_bwd_rows_avx2, (gr: &[f32], gs: &[f32], bias: &[f32], og: Ptr<f32>, gb: &mut [f32], begin: usize, end: usize, c: usize), {
+simd_kernel!(mag32_bwd_rows, mag32_bwd_rows_avx2, (gr: &[f32], gs: &[f32], bias: &[f32], og: SyncPtr<f32>, gb: &mut [f32], begin: usize, end: usize, c: usize), {
     let eps = MAGNITUDE_EPS as f32;
     for i in begin..end {
         let (lo, mid, hi) = (2 * i * c, (2 * i + 1) * c, (2 * i + 2) * c);
@@ -769,7 +717,7 @@ impl CustomFunction for Magnitude32 {
         let og = ptr::<f32>(&grad_g);
         let blocks = n.div_ceil(BIAS_BLOCK);
         let mut partial = vec![0.0f32; blocks * c];
-        let pp = Ptr(partial.as_mut_ptr());
+        let pp = SyncPtr(partial.as_mut_ptr());
         parallel_for(blocks, 1, &|b0, b1| {
             for blk in b0..b1 {
                 // SAFETY: block `blk` owns its partial row.

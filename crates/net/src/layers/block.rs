@@ -1,0 +1,85 @@
+//! One Poisson block: gradient, vector MLP, Poisson solve, vertex MLPs.
+
+use tch::Tensor;
+use tch::nn;
+
+use crate::error::{Result, shape_error};
+use crate::mesh::MeshTensors;
+use crate::profile::section;
+
+use super::{Mlp, VectorMlp, dense, gelu};
+
+/// One Poisson block (DESIGN.md section 5): gradient, vector MLP, Poisson
+/// solve with the mean removed, then two LayerScale vertex MLPs.
+#[derive(Debug)]
+pub struct PoissonBlock {
+    vector: VectorMlp,
+    mlp1: Mlp,
+    mlp2: Mlp,
+    gamma1: Tensor,
+    gamma2: Tensor,
+}
+
+impl PoissonBlock {
+    /// Creates a block of width `width` under `p` (`vector`, `mlp1`, `mlp2`,
+    /// `gamma1`, `gamma2`); `conditioned` adds the conditioning features to
+    /// the first vertex MLP's input.
+    pub fn new(
+        p: nn::Path<'_>,
+        width: usize,
+        layers: usize,
+        modulation: bool,
+        conditioned: bool,
+    ) -> Self {
+        let h = if conditioned { 3 * width } else { 2 * width };
+        Self {
+            vector: VectorMlp::new(&p / "vector", width, layers, width, modulation),
+            mlp1: Mlp::new(&p / "mlp1", h, width, width),
+            mlp2: Mlp::new(&p / "mlp2", width, width, width),
+            gamma1: p.ones("gamma1", &[width as i64]),
+            gamma2: p.ones("gamma2", &[width as i64]),
+        }
+    }
+
+    /// `x: [B, V, W]`, `cond: [B, V, W]` (the conditioning MLP's output) when
+    /// the block is conditioned. Returns the new `[B, V, W]`.
+    pub fn forward(&self, x: &Tensor, cond: Option<&Tensor>, mesh: &MeshTensors) -> Result<Tensor> {
+        let g = {
+            let _s = section("block.gradient");
+            mesh.gradient(x)?
+        };
+        // MLP1 reads h = [x, u, e]: with its first weight's columns split as
+        // [A_x | B | A_e], `h W^T = x A_x^T + u B^T + e A_e^T`, and
+        // `u B^T = remove_mean(solve(div B^T))` (module docs), so `B` folds
+        // into the last complex layer and `u` itself is never formed
+        let l1 = &self.mlp1.l1;
+        let w = x.size().last().copied().unwrap_or(0);
+        let expected = if cond.is_some() { 3 * w } else { 2 * w };
+        if l1.ws.size() != [w, expected] {
+            return Err(shape_error(
+                "block input (conditioning given to an unconditioned block, or the reverse)",
+                format!("a first vertex MLP weight [{w}, {expected}]"),
+                &l1.ws,
+            ));
+        }
+        let div =
+            self.vector
+                .forward_divergence_mapped(&g, x, mesh, Some(&l1.ws.narrow(1, w, w)))?;
+        let ub = {
+            let _s = section("block.poisson");
+            mesh.remove_mass_mean(&mesh.solve(&div)?)?
+        };
+        let _s = section("block.vertex_mlps");
+        let (input, a) = match cond {
+            Some(e) => (
+                Tensor::cat(&[x, e], -1),
+                Tensor::cat(&[l1.ws.narrow(1, 0, w), l1.ws.narrow(1, 2 * w, w)], 1),
+            ),
+            None => (x.shallow_clone(), l1.ws.narrow(1, 0, w)),
+        };
+        let pre = crate::kernels::dense::linear(&input, &a, l1.bs.as_ref())? + ub;
+        let x = x + &self.gamma1 * dense(&self.mlp1.l2, &gelu(&pre))?;
+        let x = &x + &self.gamma2 * self.mlp2.forward(&x)?;
+        Ok(x)
+    }
+}

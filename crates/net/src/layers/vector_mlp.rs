@@ -1,0 +1,115 @@
+//! The modulated complex MLP on face features (a block's step 3 and the NJF head).
+
+use tch::Tensor;
+use tch::nn;
+
+use crate::error::{NetError, Result};
+use crate::mesh::MeshTensors;
+use crate::profile::section;
+
+use super::{ComplexLinear, dense, gelu, linear};
+
+/// Modulated complex MLP on face features (DESIGN.md section 5, step 3).
+#[derive(Debug)]
+pub struct VectorMlp {
+    modulation: Option<(nn::Linear, nn::Linear)>,
+    layers: Vec<ComplexLinear>,
+    biases: Vec<Tensor>,
+}
+
+impl VectorMlp {
+    /// Creates the modulation MLP (`mod.0: Linear(W, W)`, `mod.1:
+    /// Linear(W, 2W)`), `nl` complex layers `layers.i` (the last one to
+    /// `output` channels) and the nonlinearity biases `bias.i` (zeros).
+    pub fn new(
+        p: nn::Path<'_>,
+        width: usize,
+        layers: usize,
+        output: usize,
+        modulation: bool,
+    ) -> Self {
+        let modulation = modulation.then(|| {
+            (
+                linear(&p / "mod" / 0, width, width),
+                linear(&p / "mod" / 1, width, 2 * width),
+            )
+        });
+        let mut ls = Vec::with_capacity(layers);
+        let mut biases = Vec::new();
+        for i in 0..layers {
+            let out = if i + 1 == layers { output } else { width };
+            ls.push(ComplexLinear::new(&p / "layers" / i, width, out));
+            if i + 1 < layers {
+                biases.push((&p / "bias").zeros(&i.to_string(), &[width as i64]));
+            }
+        }
+        Self {
+            modulation,
+            layers: ls,
+            biases,
+        }
+    }
+
+    /// `g: [B, 2F, W]`, `x: [B, V, W]` the vertex features whose face means
+    /// drive the modulation. Returns `[B, 2F, C_out]`.
+    pub fn forward(&self, g: &Tensor, x: &Tensor, mesh: &MeshTensors) -> Result<Tensor> {
+        let (hidden, last) = self.hidden(g, x, mesh)?;
+        let _s = section("vector.layers");
+        last.forward(&hidden)
+    }
+
+    /// `mesh.divergence(self.forward(g, x, mesh))`, `[B, V, C_out]`, with the
+    /// last complex layer applied after the divergence, on vertices
+    /// ([`ComplexLinear::forward_divergence`]): what a block needs, at about
+    /// a third of that layer's cost.
+    pub fn forward_divergence(&self, g: &Tensor, x: &Tensor, mesh: &MeshTensors) -> Result<Tensor> {
+        self.forward_divergence_mapped(g, x, mesh, None)
+    }
+
+    /// `forward_divergence(g, x, mesh) B^T` for a real channel map `B: [C,
+    /// C_out]`, folded into the last complex layer's weight
+    /// ([`ComplexLinear::forward_divergence_mapped`]). Returns `[B, V, C]`.
+    pub fn forward_divergence_mapped(
+        &self,
+        g: &Tensor,
+        x: &Tensor,
+        mesh: &MeshTensors,
+        map: Option<&Tensor>,
+    ) -> Result<Tensor> {
+        let (hidden, last) = self.hidden(g, x, mesh)?;
+        let _s = section("vector.divergence");
+        last.forward_divergence_mapped(&hidden, mesh, map)
+    }
+
+    /// The modulation and every layer but the last (with their
+    /// nonlinearities), and the last layer.
+    fn hidden(
+        &self,
+        g: &Tensor,
+        x: &Tensor,
+        mesh: &MeshTensors,
+    ) -> Result<(Tensor, &ComplexLinear)> {
+        let Some((last, rest)) = self.layers.split_last() else {
+            return Err(NetError::Config(
+                "a vector MLP needs at least one layer".into(),
+            ));
+        };
+        let mut g = match &self.modulation {
+            Some((l1, l2)) => {
+                let _s = section("vector.modulation");
+                // Linear1 commutes with the face mean (affine map, weights summing to 1)
+                let h = crate::profile::timed("vector.modulation.l1", || dense(l1, x))?;
+                let s = gelu(&mesh.face_mean(&h)?);
+                let ps = crate::profile::timed("vector.modulation.l2", || dense(l2, &s))?;
+                let _t = section("vector.modulation.apply");
+                crate::kernels::fused::modulate(g, &ps)?
+            }
+            None => g.shallow_clone(),
+        };
+        let _s = section("vector.layers");
+        for (layer, b) in rest.iter().zip(&self.biases) {
+            g = crate::kernels::fused::magnitude_gelu(&layer.forward(&g)?, b)?;
+        }
+        Ok((g, last))
+    }
+}
