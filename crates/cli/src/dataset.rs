@@ -2,17 +2,16 @@
 //! written as dataset folders.
 
 use crate::mesh_arg::load_mesh_checked;
-use crate::output::{ensure_empty, write_json};
+use crate::output::ensure_empty;
 use crate::pictures::{channel, save_grid};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use mfm_data::SignalSource;
-use mfm_data::dataset::{Dataset, Manifest};
 use mfm_data::deformations::{self, DeformMeshes};
 use mfm_data::experiment::GmmMeshes;
-use mfm_data::gmm::{GenerateOptions, GmmConfig, GmmDistance, GmmGenerator};
+use mfm_data::gmm::{GenerateOptions, GmmConfig, GmmDistance};
+use mfm_data::layout::{self, DeformExperiment, GmmExperiment};
 use mfm_geometry::TriMesh;
-use mfm_geometry::frame::CanonicalFrame;
 use mfm_render::{ColorRange, Panel};
 use std::path::{Path, PathBuf};
 
@@ -131,19 +130,7 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
     ensure_empty(&a.out)?;
     let t0 = std::time::Instant::now();
     let input = load_mesh_checked(&a.mesh)?;
-    let undo = dataset_undo(
-        &a.out,
-        &[
-            "train",
-            "reference",
-            "holdout",
-            "original.ply",
-            "coarse.ply",
-            "eval.ply",
-            "space.json",
-            "preview.png",
-        ],
-    )?;
+    let undo = dataset_undo(&a.out, &DeformExperiment::ENTRIES)?;
     let meshes = DeformMeshes::from_mesh(&input, a.coarse_faces)
         .with_context(|| format!("preparing the meshes of {}", a.mesh))?;
     let space = deformations::space_for(
@@ -167,58 +154,17 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
             m.num_faces(),
             sizes.join(", ")
         );
-        mfm_meshio::write_ply(a.out.join(format!("{role}.ply")), m, &[])?;
     }
-    write_json(&a.out.join("space.json"), &space)?;
-    let norm = meshes.normalization;
-    let held_out_seed = a.seed ^ 0x5eed_0f2e_f5e7;
-    let train = deformations::write_dataset(
-        &a.out.join("train"),
-        &meshes.coarse,
-        &space,
-        a.seed,
-        0..a.n,
-        norm,
-        meshes.frame,
-        "coarse",
-        &format!(
-            "mfm dataset deform: training shapes on the coarse mesh of {}",
-            a.mesh
-        ),
-        true,
-    )?;
-    if a.reference > 0 {
-        deformations::write_dataset(
-            &a.out.join("reference"),
-            &meshes.eval,
-            &space,
-            held_out_seed,
-            0..a.reference,
-            norm,
-            meshes.frame,
-            "eval",
-            &format!(
-                "mfm dataset deform: held-out shapes on the evaluation mesh of {}",
-                a.mesh
-            ),
-            true,
-        )?;
-        deformations::write_dataset(
-            &a.out.join("holdout"),
-            &meshes.coarse,
-            &space,
-            held_out_seed,
-            0..a.reference,
-            norm,
-            meshes.frame,
-            "coarse",
-            &format!(
-                "mfm dataset deform: held-out shapes on the coarse mesh of {}",
-                a.mesh
-            ),
-            true,
-        )?;
+    let train = DeformExperiment {
+        meshes: &meshes,
+        space: &space,
+        source: &a.mesh,
+        train: a.n,
+        reference: a.reference,
+        seed: a.seed,
+        progress: true,
     }
+    .write(&a.out)?;
     let preview = train.load_all()?;
     let shapes: Vec<TriMesh> = (0..preview.len().min(8))
         .map(|i| meshes.coarse.with_positions(preview.positions(i)))
@@ -235,7 +181,7 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
         3,
         "deformation training shapes",
         ColorRange::Auto,
-        &a.out.join("preview.png"),
+        &a.out.join(layout::PREVIEW),
     )?;
     undo.keep();
     println!(
@@ -289,41 +235,22 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
         test_mesh.num_vertices(),
         test_mesh.num_faces()
     );
+    let undo = dataset_undo(&a.out, &GmmExperiment::ENTRIES)?;
+    let t0 = std::time::Instant::now();
     let progress = GenerateOptions {
         progress_bar: true,
         on_progress: None,
     };
-    let frame = CanonicalFrame::of(&train_mesh)
-        .with_context(|| format!("placing the training mesh {source} in the canonical frame"))?;
-    let write = |dir: &Path, mesh: &TriMesh, n: usize, seed: u64, role: &str| -> Result<Dataset> {
-        let generator = GmmGenerator::new(mesh, &config)?;
-        let signals = generator.generate_with(n, seed, &progress)?;
-        let manifest = Manifest::new("gmm", config.manifest_params())
-            .with_seed(seed)
-            .with_provenance(format!("mfm dataset gmm: {role} set on {source}"))
-            .with_frame(frame);
-        Ok(Dataset::write(dir, mesh, &signals, manifest)?)
-    };
-    let undo = dataset_undo(
-        &a.out,
-        &["train", "reference", "test_mesh.ply", "preview.png"],
-    )?;
-    let t0 = std::time::Instant::now();
-    let train = write(&a.out.join("train"), &train_mesh, a.n, a.seed, "training")?;
-    // A different seed stream for the reference set: its signals are not
-    // copies of training signals on another mesh.
-    let reference_seed = a.seed ^ 0x5eed_0f2e_f5e7;
-    if a.reference > 0 {
-        write(
-            &a.out.join("reference"),
-            &test_mesh,
-            a.reference,
-            reference_seed,
-            "reference",
-        )?;
-    } else {
-        mfm_meshio::write_ply(a.out.join("test_mesh.ply"), &test_mesh, &[])?;
+    let train = GmmExperiment {
+        config: &config,
+        train_mesh: &train_mesh,
+        test_mesh: &test_mesh,
+        source: &source,
+        train: a.n,
+        reference: a.reference,
+        seed: a.seed,
     }
+    .write(&a.out, &progress)?;
     let preview = train.load_all()?;
     let k = preview.len().min(8);
     let values: Vec<Vec<f64>> = (0..k).map(|i| channel(&preview, i, 0)).collect();
@@ -337,7 +264,7 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
         4,
         "GMM training signals",
         ColorRange::Auto,
-        &a.out.join("preview.png"),
+        &a.out.join(layout::PREVIEW),
     )?;
     undo.keep();
     println!(

@@ -7,12 +7,12 @@ use crate::pictures::{channel, save_grid};
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use mfm_data::dataset::Dataset;
-use mfm_data::deformations::{self, DeformManifest};
-use mfm_data::gmm::{GmmConfig, GmmGenerator};
-use mfm_data::metrics::Metrics;
-use mfm_data::quality::{GmmQualityReport, ParamSpread, Quartiles};
+use mfm_data::deformations;
+use mfm_data::evaluation;
+use mfm_data::layout;
+use mfm_data::quality::GmmQualityReport;
 use mfm_data::{InMemorySignals, SignalSource};
-use mfm_geometry::{TriMesh, operators};
+use mfm_geometry::TriMesh;
 use mfm_render::{ColorRange, Colormap, Panel, RenderOptions};
 use std::path::{Path, PathBuf};
 
@@ -90,88 +90,52 @@ pub fn eval(a: EvalArgs) -> Result<()> {
             reference.channels()
         );
     }
-    let mesh = reference.mesh().clone();
-    let deform = DeformManifest::of(&reference)?;
-    let gmm = (reference.manifest().generator == mfm_data::gmm::GENERATOR_NAME)
-        .then(|| GmmConfig::from_manifest_params(&reference.manifest().generator_params))
-        .transpose()
-        .with_context(|| format!("{}: the GMM parameters", reference_dir.display()))?;
-    let ops = operators::Operators::new(&mesh)?;
-    let mass: Vec<f64> = ops.mass.clone();
-    let reference = reference.load_all()?;
-    let metrics = Metrics::evaluate(&mass, &generated, &reference)?;
-    let mut report = serde_json::to_value(&metrics)?;
-    if let (Some(config), 1) = (&gmm, generated.channels()) {
-        let generator = GmmGenerator::new(&mesh, config)?;
-        let q = GmmQualityReport::of(&generator, &mesh, &mass, &generated, &reference)?;
-        println!("{}", q.summary());
-        report["quality"] = serde_json::to_value(&q)?;
-        if let Some(png) = &a.png {
-            let side = sibling_png(png, "samples");
-            save_data_and_samples(&mesh, &reference, &generated, &q, &side)?;
-        }
-    }
-    if let Some(d) = &deform {
-        let p = deformations::plausibility(&d.space, &mesh, &generated, 4)?;
-        let r = deformations::plausibility(&d.space, &mesh, &reference, 0)?;
-        let q = Quartiles::of(&p.mse);
-        let (gs, rs) = (ParamSpread::of(&p.params), ParamSpread::of(&r.params));
-        println!(
-            "projection MSE (plausibility): generated median {:.3e} [{:.3e}, {:.3e}], mean {:.3e}; reference mean {:.3e}",
-            q.median, q.q1, q.q3, p.mean, r.mean
-        );
-        println!(
-            "handle-parameter spread of the projections: rotation {:.3} rad (data {:.3}), translation {:.4} (data {:.4})",
-            gs.rotation, rs.rotation, gs.translation, rs.translation
-        );
-        report["projection_mse"] = p.mean.into();
-        report["projection_mse_median"] = p.median.into();
-        report["projection_mse_quartiles"] = serde_json::to_value(q)?;
-        report["reference_projection_mse"] = r.mean.into();
-        report["param_spread"] = serde_json::to_value(gs)?;
-        report["reference_param_spread"] = serde_json::to_value(rs)?;
-        report["spread_ratio"] = serde_json::json!({
-            "rotation": gs.rotation / rs.rotation,
-            "translation": gs.translation / rs.translation,
-        });
-        if let Some(png) = &a.png {
-            save_projection_grid(&mesh, &generated, &p, png)?;
-        }
-    }
-    println!(
-        "MMD {:.5}  COV {:.3}  1-NNA {:.3}  test error {:.5}  ({} generated, {} reference)",
-        metrics.mmd,
-        metrics.cov,
-        metrics.one_nna,
-        metrics.test_error,
-        metrics.num_generated,
-        metrics.num_reference
-    );
+    let e = evaluation::evaluate(&reference, &generated)
+        .with_context(|| format!("evaluating against {}", reference_dir.display()))?;
+    println!("{}", e.report.summary());
     if let Some(out) = &a.out {
-        write_json(out, &report)?;
+        write_json(out, &e.report)?;
     }
-    if let (Some(png), None) = (&a.png, &deform) {
+    let Some(png) = &a.png else {
+        undo.keep();
+        return Ok(());
+    };
+    let mesh = &e.mesh;
+    if let Some(q) = &e.report.quality {
+        save_data_and_samples(
+            mesh,
+            &e.reference,
+            &generated,
+            q,
+            &sibling_png(png, "samples"),
+        )?;
+    }
+    if let Some(p) = &e.projections {
+        save_projection_grid(mesh, &generated, p, png)?;
+    } else {
         let mean_gen = pointwise_mean(&generated);
-        let mean_ref = pointwise_mean(&reference);
+        let mean_ref = pointwise_mean(&e.reference);
         let diff: Vec<f64> = mean_gen.iter().zip(&mean_ref).map(|(g, r)| g - r).collect();
         let panels = [
-            Panel::new(&mesh, Some(mean_gen.as_slice()), "generated mean"),
-            Panel::new(&mesh, Some(mean_ref.as_slice()), "reference mean"),
+            Panel::new(mesh, Some(mean_gen.as_slice()), "generated mean"),
+            Panel::new(mesh, Some(mean_ref.as_slice()), "reference mean"),
         ];
         save_grid(
             &panels,
             2,
-            &format!("point-wise means, test error {:.4}", metrics.test_error),
+            &format!(
+                "point-wise means, test error {:.4}",
+                e.report.metrics.test_error
+            ),
             ColorRange::Auto,
             png,
         )?;
-        let diff_png = sibling_png(png, "difference");
         let mut opts = RenderOptions::with_size(400, 400);
         opts.colormap = Colormap::CoolWarm;
         opts.range = ColorRange::Symmetric;
         opts.colorbar = true;
-        let img = mfm_render::render_mesh(&mesh, Some(&diff), &opts)?;
-        mfm_render::save_png(&img, &diff_png)?;
+        let img = mfm_render::render_mesh(mesh, Some(&diff), &opts)?;
+        mfm_render::save_png(&img, sibling_png(png, "difference"))?;
     }
     undo.keep();
     Ok(())
@@ -183,14 +147,7 @@ fn eval_plausibility_only(a: &EvalArgs, generated: &InMemorySignals) -> Result<(
     let (Some(space_path), Some(mesh_spec)) = (&a.space, &a.mesh) else {
         bail!("give --reference DIR, or --space space.json with --mesh MESH");
     };
-    let text = std::fs::read_to_string(space_path)
-        .with_context(|| format!("cannot read {}", space_path.display()))?;
-    let space: mfm_deform::DeformSpace = serde_json::from_str(&text).with_context(|| {
-        format!(
-            "{}: not a deformation space (space.json of mfm dataset deform)",
-            space_path.display()
-        )
-    })?;
+    let space = layout::read_space(space_path)?;
     let mesh = load_mesh_checked(mesh_spec)?;
     if generated.num_vertices() != mesh.num_vertices() || generated.channels() != 3 {
         bail!(
@@ -202,24 +159,13 @@ fn eval_plausibility_only(a: &EvalArgs, generated: &InMemorySignals) -> Result<(
             mesh.num_vertices()
         );
     }
-    let p = deformations::plausibility(&space, &mesh, generated, 4)?;
+    let (report, p) = evaluation::plausibility_only(&space, &mesh, generated)?;
     println!(
         "projection MSE (plausibility): mean {:.3e} median {:.3e} ({} samples on {} vertices)",
-        p.mean,
-        p.median,
-        generated.len(),
-        mesh.num_vertices()
+        report.projection_mse, report.projection_mse_median, report.num_generated, report.vertices
     );
     if let Some(out) = &a.out {
-        write_json(
-            out,
-            &serde_json::json!({
-                "projection_mse": p.mean,
-                "projection_mse_median": p.median,
-                "num_generated": generated.len(),
-                "vertices": mesh.num_vertices(),
-            }),
-        )?;
+        write_json(out, &report)?;
     }
     if let Some(png) = &a.png {
         save_projection_grid(&mesh, generated, &p, png)?;

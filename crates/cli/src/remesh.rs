@@ -4,7 +4,6 @@
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use mfm_data::deformations::{Damage, damaged_mesh};
-use mfm_deform::DeformSpace;
 use mfm_geometry::subdivide;
 use std::path::PathBuf;
 
@@ -55,14 +54,7 @@ pub fn run(a: RemeshArgs) -> Result<()> {
     if let Some(name) = &a.damage {
         let damage: Damage = name.parse()?;
         let path = a.space.as_ref().context("--damage needs --space")?;
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("cannot read {}", path.display()))?;
-        let space: DeformSpace = serde_json::from_str(&text).with_context(|| {
-            format!(
-                "{}: not a deformation space (space.json of mfm dataset deform)",
-                path.display()
-            )
-        })?;
+        let space = mfm_data::layout::read_space(path)?;
         mesh = damaged_mesh(&mesh, &space, damage, a.seed)?;
     }
     crate::commands::write_mesh(&mesh, &a.out)?;

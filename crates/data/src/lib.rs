@@ -2,7 +2,8 @@
 //!
 //! The data side of flow matching on meshes, without libtorch: datasets of
 //! signals over one mesh (folder format, streaming reads, validation), the
-//! GMM and deformation generators and their experiment meshes, the
+//! GMM and deformation generators, their experiment meshes and folder
+//! layout, the
 //! distribution metrics (MMD, COV, 1-NNA, test error) and the
 //! sample-quality measures that a flat, noisy or collapsed sample set cannot
 //! pass. `mfm-fm` trains and samples on top of it; `mfm` built without its
@@ -11,8 +12,10 @@
 pub mod dataset;
 pub mod deformations;
 pub mod error;
+pub mod evaluation;
 pub mod experiment;
 pub mod gmm;
+pub mod layout;
 pub mod metrics;
 pub mod quality;
 pub mod signals;

@@ -9,6 +9,7 @@
 pub mod adam;
 pub mod checkpoint;
 pub mod config;
+pub mod context;
 pub mod error;
 pub mod sample;
 pub mod train;

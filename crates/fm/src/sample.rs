@@ -46,6 +46,7 @@ use tch::{Device, Kind, Tensor};
 
 use crate::checkpoint::{self, FLOW_FILE, FlowSpec, WEIGHTS_FILE};
 use crate::config::{DeviceChoice, OdeMethod, SampleConfig};
+use crate::context::MeshContext;
 use crate::error::{FmError, Result};
 
 /// Relative size difference above which [`Sampler::surface_warnings`]
@@ -306,7 +307,8 @@ impl Sampler {
         &self.net
     }
 
-    /// Builds the operators and the noise sampler of a target mesh.
+    /// Builds the operators (once, [`MeshContext`]), the noise sampler and
+    /// the network's tensors of a target mesh.
     ///
     /// Cost: the mesh operators and two sparse factorizations.
     ///
@@ -314,10 +316,10 @@ impl Sampler {
     /// Operator, factorization or noise errors of the mesh.
     pub fn prepare(&self, mesh: &TriMesh) -> Result<TargetMesh> {
         let framed = self.flow.frame.apply(mesh);
-        let noise = NoiseSampler::new(&framed, self.flow.noise)?;
+        let context = MeshContext::new(&framed, self.flow.noise)?;
         Ok(TargetMesh {
-            mesh: MeshTensors::new(&framed)?,
-            noise,
+            mesh: context.tensors,
+            noise: context.noise,
             xyz: positions_tensor(&framed, self.net.device()),
         })
     }

@@ -83,6 +83,7 @@ use crate::checkpoint::{
     OPTIMIZER_FILE, WEIGHTS_FILE,
 };
 use crate::config::{DeviceChoice, FrameChoice, NoiseScale, RunConfig};
+use crate::context::MeshContext;
 use crate::error::{FmError, Result};
 use crate::sample::{conditioning, offset_tensor, positions_tensor};
 use crate::signals::{FramedPositions, SignalSource};
@@ -534,11 +535,11 @@ impl Trainer {
         signals: Arc<dyn SignalSource>,
     ) -> Result<Self> {
         let (framed_mesh, framed_signals) = in_frame(frame.frame, frame.positions, mesh, signals)?;
-        let noise = NoiseSampler::new(&framed_mesh, config.noise.kind)?;
-        let flow = resolve_flow(&config, &noise, framed_signals.as_ref(), frame)?;
+        let context = MeshContext::new(&framed_mesh, config.noise.kind)?;
+        let flow = resolve_flow(&config, &context.noise, framed_signals.as_ref(), frame)?;
         flow.write(run_dir.join(FLOW_FILE))?;
         truncate_log(&run_dir.join(LOG_FILE), 0)?;
-        Self::build(run_dir, config, flow, &framed_mesh, framed_signals, noise)
+        Self::build(run_dir, config, flow, &framed_mesh, framed_signals, context)
     }
 
     /// Continues the run in `run_dir` from its newest valid checkpoint, with
@@ -628,8 +629,8 @@ impl Trainer {
             });
         }
         let (framed_mesh, framed_signals) = in_frame(flow.frame, flow.positions, mesh, signals)?;
-        let noise = NoiseSampler::new(&framed_mesh, config.noise.kind)?;
-        let mut t = Self::build(run_dir, config, flow, &framed_mesh, framed_signals, noise)?;
+        let context = MeshContext::new(&framed_mesh, config.noise.kind)?;
+        let mut t = Self::build(run_dir, config, flow, &framed_mesh, framed_signals, context)?;
         t.net.load_weights(info.dir.join(WEIGHTS_FILE))?;
         t.adam.load(&info.dir.join(OPTIMIZER_FILE), state.step)?;
         t.step = state.step;
@@ -659,15 +660,20 @@ impl Trainer {
         Self::start(run_dir, config, frame, mesh, signals)
     }
 
-    /// Builds a run from its flow spec; `mesh`, `signals` and `noise` are
+    /// Builds a run from its flow spec; `mesh`, `signals` and `context` are
     /// already in the flow's frame.
+    ///
+    /// Every constructor ends here: [`Trainer::new`] (and a resumed folder
+    /// without checkpoints) through `start`, which resolves and writes the
+    /// flow spec; [`Trainer::resume`] and [`Trainer::resume_on`] with the
+    /// checkpoint's spec, loading the weights and the optimizer after.
     fn build(
         run_dir: PathBuf,
         config: RunConfig,
         flow: FlowSpec,
         mesh: &TriMesh,
         signals: Arc<dyn SignalSource>,
-        noise: NoiseSampler,
+        context: MeshContext,
     ) -> Result<Self> {
         mfm_net::runtime::tune_allocator();
         if config.train.augment.is_active() && flow.channels != 3 {
@@ -689,7 +695,10 @@ impl Trainer {
         };
         let t = &config.train;
         let adam = Adam::new(&net, t.adam_beta1, t.adam_beta2, t.adam_eps);
-        let mesh_tensors = MeshTensors::new(mesh)?;
+        let MeshContext {
+            noise,
+            tensors: mesh_tensors,
+        } = context;
         let order = EpochOrder::new(t.seed, signals.len());
         Ok(Self {
             xyz: positions_tensor(mesh, device),

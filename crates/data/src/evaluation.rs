@@ -1,0 +1,247 @@
+//! What `mfm eval` measures, as report types: the distribution metrics of
+//! generated samples against a reference set, the sample-quality fit of
+//! the data's own family (GMM bumps, or the deformation space's
+//! projection), and the same projection error alone when only a
+//! deformation space is at hand.
+//!
+//! [`evaluate`] runs the whole protocol on a reference dataset and returns
+//! an [`Evaluation`]: the serializable [`EvalReport`] (the `--out` JSON,
+//! field names stable) with what pictures of it need. The report's
+//! [`EvalReport::summary`] is the text `mfm eval` prints.
+//!
+//! Cost: the metrics are `O(N_gen N_ref V)`; the GMM fit factors the mesh's
+//! heat-method operators once; the projection solves one ARAP fit per shape.
+
+use serde::{Deserialize, Serialize};
+
+use mfm_deform::DeformSpace;
+use mfm_geometry::TriMesh;
+use mfm_geometry::operators::Operators;
+
+use crate::dataset::Dataset;
+use crate::deformations::{self, DeformManifest, Plausibility};
+use crate::error::{DataError, Result};
+use crate::gmm::{self, GmmConfig, GmmGenerator};
+use crate::metrics::Metrics;
+use crate::quality::{GmmQualityReport, ParamSpread, Quartiles};
+use crate::signals::{InMemorySignals, SignalSource};
+
+/// Generated shapes whose projections [`evaluate`] keeps for pictures.
+pub const PROJECTIONS_KEPT: usize = 4;
+
+/// The report of [`evaluate`] (`mfm eval --out`): the metrics' fields at the
+/// top level, then the quality fit of the data's family.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EvalReport {
+    /// MMD, COV, 1-NNA, test error and the set sizes.
+    #[serde(flatten)]
+    pub metrics: Metrics,
+    /// The bump fit (scalar GMM reference sets only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quality: Option<GmmQualityReport>,
+    /// The projection onto the deformation space (deformation reference
+    /// sets only), its fields at the top level.
+    #[serde(flatten, default, skip_serializing_if = "Option::is_none")]
+    pub shapes: Option<ShapeReport>,
+}
+
+/// How far generated shapes are from the deformation space, and how much
+/// their projections' parameters vary, next to the reference set's.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ShapeReport {
+    /// Mean projection MSE of the generated shapes (plausibility).
+    pub projection_mse: f64,
+    /// Its median.
+    pub projection_mse_median: f64,
+    /// Its quartiles.
+    pub projection_mse_quartiles: Quartiles,
+    /// Mean projection MSE of the reference shapes (the data's floor).
+    pub reference_projection_mse: f64,
+    /// Spread of the generated projections' handle parameters.
+    pub param_spread: ParamSpread,
+    /// The same for the reference set.
+    pub reference_param_spread: ParamSpread,
+    /// `param_spread / reference_param_spread`, per kind (1 = the data's
+    /// variety, 0 = collapsed).
+    pub spread_ratio: SpreadRatio,
+}
+
+/// Generated over reference parameter spread.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpreadRatio {
+    /// Of the handle rotations.
+    pub rotation: f64,
+    /// Of the handle translations.
+    pub translation: f64,
+}
+
+impl EvalReport {
+    /// The lines `mfm eval` prints: the quality fit, the projection, then the
+    /// metrics.
+    pub fn summary(&self) -> String {
+        let mut lines = Vec::new();
+        if let Some(q) = &self.quality {
+            lines.push(q.summary());
+        }
+        if let Some(s) = &self.shapes {
+            let q = s.projection_mse_quartiles;
+            lines.push(format!(
+                "projection MSE (plausibility): generated median {:.3e} [{:.3e}, {:.3e}], mean {:.3e}; reference mean {:.3e}",
+                q.median, q.q1, q.q3, s.projection_mse, s.reference_projection_mse
+            ));
+            let (g, r) = (s.param_spread, s.reference_param_spread);
+            lines.push(format!(
+                "handle-parameter spread of the projections: rotation {:.3} rad (data {:.3}), translation {:.4} (data {:.4})",
+                g.rotation, r.rotation, g.translation, r.translation
+            ));
+        }
+        let m = &self.metrics;
+        lines.push(format!(
+            "MMD {:.5}  COV {:.3}  1-NNA {:.3}  test error {:.5}  ({} generated, {} reference)",
+            m.mmd, m.cov, m.one_nna, m.test_error, m.num_generated, m.num_reference
+        ));
+        lines.join("\n")
+    }
+}
+
+/// An [`EvalReport`] with what pictures of it need.
+#[derive(Debug)]
+pub struct Evaluation {
+    /// The report.
+    pub report: EvalReport,
+    /// The reference set's mesh (the mesh the samples live on).
+    pub mesh: TriMesh,
+    /// The reference signals.
+    pub reference: InMemorySignals,
+    /// The generated shapes' projections (the first [`PROJECTIONS_KEPT`]
+    /// kept), for deformation reference sets.
+    pub projections: Option<Plausibility>,
+}
+
+/// Evaluates `generated` (on the reference set's mesh, with its channels)
+/// against `reference`: [`Metrics`] always; the bump fit for a scalar GMM
+/// set; the projection onto the deformation space for a deformation set.
+///
+/// # Errors
+/// [`DataError::SizeMismatch`] when the samples' vertices or channels are
+/// not the reference's; [`DataError::Format`] for unreadable generator
+/// parameters; the metrics', fits' and projection's errors.
+pub fn evaluate(reference: &Dataset, generated: &InMemorySignals) -> Result<Evaluation> {
+    for (what, found, expected) in [
+        (
+            "vertices of the samples",
+            generated.num_vertices(),
+            reference.num_vertices(),
+        ),
+        (
+            "channels of the samples",
+            generated.channels(),
+            reference.channels(),
+        ),
+    ] {
+        if found != expected {
+            return Err(DataError::SizeMismatch {
+                what: what.into(),
+                expected,
+                found,
+            });
+        }
+    }
+    let mesh = reference.mesh().clone();
+    let deform = DeformManifest::of(reference)?;
+    let gmm = (reference.manifest().generator == gmm::GENERATOR_NAME)
+        .then(|| GmmConfig::from_manifest_params(&reference.manifest().generator_params))
+        .transpose()?;
+    let mass = Operators::new(&mesh)?.mass;
+    let reference = reference.load_all()?;
+    let metrics = Metrics::evaluate(&mass, generated, &reference)?;
+    let quality = match (&gmm, generated.channels()) {
+        (Some(config), 1) => {
+            let generator = GmmGenerator::new(&mesh, config)?;
+            Some(GmmQualityReport::of(
+                &generator, &mesh, &mass, generated, &reference,
+            )?)
+        }
+        _ => None,
+    };
+    let (shapes, projections) = match &deform {
+        Some(d) => {
+            let p = deformations::plausibility(&d.space, &mesh, generated, PROJECTIONS_KEPT)?;
+            let r = deformations::plausibility(&d.space, &mesh, &reference, 0)?;
+            let (g, rs) = (ParamSpread::of(&p.params), ParamSpread::of(&r.params));
+            let report = ShapeReport {
+                projection_mse: p.mean,
+                projection_mse_median: p.median,
+                projection_mse_quartiles: Quartiles::of(&p.mse),
+                reference_projection_mse: r.mean,
+                param_spread: g,
+                reference_param_spread: rs,
+                spread_ratio: SpreadRatio {
+                    rotation: g.rotation / rs.rotation,
+                    translation: g.translation / rs.translation,
+                },
+            };
+            (Some(report), Some(p))
+        }
+        None => (None, None),
+    };
+    Ok(Evaluation {
+        report: EvalReport {
+            metrics,
+            quality,
+            shapes,
+        },
+        mesh,
+        reference,
+        projections,
+    })
+}
+
+/// The projection error of shapes on `mesh` when there is no reference set,
+/// only a deformation space (`mfm eval --space`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PlausibilityReport {
+    /// Mean projection MSE.
+    pub projection_mse: f64,
+    /// Its median.
+    pub projection_mse_median: f64,
+    /// Number of shapes.
+    pub num_generated: usize,
+    /// Vertices of the mesh.
+    pub vertices: usize,
+}
+
+/// Projects 3-channel `shapes` on `mesh` onto `space` (the first
+/// [`PROJECTIONS_KEPT`] projections kept) and reports the error.
+///
+/// # Errors
+/// [`DataError::SizeMismatch`] unless the shapes are positions of `mesh`'s
+/// vertices; the projection's errors.
+pub fn plausibility_only(
+    space: &DeformSpace,
+    mesh: &TriMesh,
+    shapes: &InMemorySignals,
+) -> Result<(PlausibilityReport, Plausibility)> {
+    if shapes.channels() != 3 {
+        return Err(DataError::SizeMismatch {
+            what: "channels of the shapes (positions)".into(),
+            expected: 3,
+            found: shapes.channels(),
+        });
+    }
+    if shapes.num_vertices() != mesh.num_vertices() {
+        return Err(DataError::SizeMismatch {
+            what: "vertices of the shapes".into(),
+            expected: mesh.num_vertices(),
+            found: shapes.num_vertices(),
+        });
+    }
+    let p = deformations::plausibility(space, mesh, shapes, PROJECTIONS_KEPT)?;
+    let report = PlausibilityReport {
+        projection_mse: p.mean,
+        projection_mse_median: p.median,
+        num_generated: shapes.len(),
+        vertices: mesh.num_vertices(),
+    };
+    Ok((report, p))
+}

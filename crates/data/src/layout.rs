@@ -1,0 +1,278 @@
+//! The folder layout of an experiment: what `mfm dataset gmm` and
+//! `mfm dataset deform` write, and where `mfm train`, `mfm eval` and the
+//! xtask experiments find it.
+//!
+//! | entry | written by | what |
+//! |---|---|---|
+//! | [`TRAIN`] | both | the training set, a dataset folder on the training mesh |
+//! | [`REFERENCE`] | both, when held-out signals are asked for | held-out signals on the evaluation mesh (another triangulation of the same surface) |
+//! | [`HOLDOUT`] | deform | the same held-out parameters on the training mesh |
+//! | [`TEST_MESH`] | gmm, without a reference set | the test mesh alone |
+//! | `original.ply`, `coarse.ply`, `eval.ply` | deform | the normalized input, training and evaluation meshes ([`DEFORM_MESHES`]) |
+//! | [`SPACE`] | deform | the deformation space ([`read_space`]) |
+//! | [`PREVIEW`] | both (by the caller) | a picture of the first training signals |
+//!
+//! Held-out sets draw from [`held_out_seed`]`(seed)`, a different stream
+//! than the training set's `seed`, so they are not copies of training
+//! signals on another mesh. Every dataset of an experiment records the
+//! canonical frame of the training mesh.
+//!
+//! # Example
+//! ```
+//! use mfm_data::experiment::GmmMeshes;
+//! use mfm_data::gmm::{GenerateOptions, GmmConfig, GmmDistance};
+//! use mfm_data::layout::{self, GmmExperiment};
+//! use mfm_data::SignalSource;
+//! use mfm_geometry::procedural;
+//! let meshes = GmmMeshes::from_base(procedural::icosphere(2), Default::default()).unwrap();
+//! let config = GmmConfig { distance: GmmDistance::Euclidean, ..GmmConfig::default() };
+//! let dir = tempfile::tempdir().unwrap();
+//! let experiment = GmmExperiment {
+//!     config: &config,
+//!     train_mesh: &meshes.train,
+//!     test_mesh: &meshes.test,
+//!     source: "icosphere(2)",
+//!     train: 4,
+//!     reference: 2,
+//!     seed: 7,
+//! };
+//! let train = experiment.write(dir.path(), &GenerateOptions::default()).unwrap();
+//! assert_eq!(train.len(), 4);
+//! assert!(dir.path().join(layout::REFERENCE).join("manifest.json").is_file());
+//! ```
+
+use std::ops::Range;
+use std::path::Path;
+
+use mfm_deform::DeformSpace;
+use mfm_geometry::TriMesh;
+use mfm_geometry::frame::CanonicalFrame;
+
+use crate::dataset::{Dataset, Manifest};
+use crate::deformations::{self, DeformMeshes};
+use crate::error::{DataError, Result};
+use crate::gmm::{GenerateOptions, GmmConfig, GmmGenerator};
+
+/// The training set's folder.
+pub const TRAIN: &str = "train";
+/// The held-out set on the evaluation mesh.
+pub const REFERENCE: &str = "reference";
+/// The held-out set on the training mesh (deformation experiments).
+pub const HOLDOUT: &str = "holdout";
+/// The test mesh of a GMM experiment written without a reference set.
+pub const TEST_MESH: &str = "test_mesh.ply";
+/// The deformation space of a deformation experiment.
+pub const SPACE: &str = "space.json";
+/// The preview picture of the training signals.
+pub const PREVIEW: &str = "preview.png";
+/// The mesh files of a deformation experiment, by role.
+pub const DEFORM_MESHES: [&str; 3] = ["original.ply", "coarse.ply", "eval.ply"];
+
+/// The seed of an experiment's held-out sets, given the training seed.
+pub fn held_out_seed(seed: u64) -> u64 {
+    seed ^ 0x5eed_0f2e_f5e7
+}
+
+/// A GMM experiment: a training set on `train_mesh` and, when `reference >
+/// 0`, a reference set on `test_mesh`.
+#[derive(Clone, Copy, Debug)]
+pub struct GmmExperiment<'a> {
+    /// The generator's parameters.
+    pub config: &'a GmmConfig,
+    /// The training mesh (it fixes the canonical frame).
+    pub train_mesh: &'a TriMesh,
+    /// The test mesh: another triangulation of the same surface.
+    pub test_mesh: &'a TriMesh,
+    /// Where the meshes came from, for the manifests (`builtin:blob`, a path).
+    pub source: &'a str,
+    /// Number of training signals (at least 1).
+    pub train: usize,
+    /// Number of reference signals (0 writes [`TEST_MESH`] instead).
+    pub reference: usize,
+    /// The training seed.
+    pub seed: u64,
+}
+
+impl GmmExperiment<'_> {
+    /// What [`Self::write`] creates in its folder (and the caller's
+    /// [`PREVIEW`]), for cleaning up after a failure.
+    pub const ENTRIES: [&'static str; 4] = [TRAIN, REFERENCE, TEST_MESH, PREVIEW];
+
+    /// Generates and writes the experiment into `out` (which must exist);
+    /// returns the training set.
+    ///
+    /// Cost: one [`GmmGenerator`] per mesh (a factorization for geodesic
+    /// distances), then `O(V)` per signal.
+    ///
+    /// # Errors
+    /// [`DataError::Config`] for no training signals or invalid GMM
+    /// parameters; the generator's and the dataset writer's errors.
+    pub fn write(&self, out: &Path, options: &GenerateOptions) -> Result<Dataset> {
+        self.config.validate()?;
+        if self.train == 0 {
+            return Err(DataError::Config(
+                "a GMM experiment needs at least 1 training signal".into(),
+            ));
+        }
+        let frame = CanonicalFrame::of(self.train_mesh).map_err(|e| DataError::MeshProcessing {
+            what: format!(
+                "placing the training mesh {} in the canonical frame",
+                self.source
+            ),
+            source: Box::new(e),
+        })?;
+        let write = |dir: &Path, mesh: &TriMesh, n: usize, seed: u64, role: &str| {
+            let generator = GmmGenerator::new(mesh, self.config)?;
+            let signals = generator.generate_with(n, seed, options)?;
+            let manifest = Manifest::new(crate::gmm::GENERATOR_NAME, self.config.manifest_params())
+                .with_seed(seed)
+                .with_provenance(format!("mfm dataset gmm: {role} set on {}", self.source))
+                .with_frame(frame);
+            Dataset::write(dir, mesh, &signals, manifest)
+        };
+        let train = write(
+            &out.join(TRAIN),
+            self.train_mesh,
+            self.train,
+            self.seed,
+            "training",
+        )?;
+        if self.reference > 0 {
+            write(
+                &out.join(REFERENCE),
+                self.test_mesh,
+                self.reference,
+                held_out_seed(self.seed),
+                "reference",
+            )?;
+        } else {
+            mfm_meshio::write_ply(out.join(TEST_MESH), self.test_mesh, &[])?;
+        }
+        Ok(train)
+    }
+}
+
+/// A deformation experiment: training shapes on the coarse mesh, held-out
+/// shapes on the evaluation mesh ([`REFERENCE`]) and on the coarse mesh
+/// ([`HOLDOUT`]), the three meshes and the deformation space.
+#[derive(Clone, Copy, Debug)]
+pub struct DeformExperiment<'a> {
+    /// The normalized, coarse and evaluation meshes.
+    pub meshes: &'a DeformMeshes,
+    /// The deformation space (handles on `meshes.original`, ranges).
+    pub space: &'a DeformSpace,
+    /// Where the mesh came from, for the manifests.
+    pub source: &'a str,
+    /// Number of training shapes (at least 1).
+    pub train: usize,
+    /// Number of held-out shapes (0 writes no held-out sets).
+    pub reference: usize,
+    /// The training seed.
+    pub seed: u64,
+    /// Whether to show progress bars.
+    pub progress: bool,
+}
+
+impl DeformExperiment<'_> {
+    /// What [`Self::write`] creates in its folder (and the caller's
+    /// [`PREVIEW`]), for cleaning up after a failure.
+    pub const ENTRIES: [&'static str; 8] = [
+        TRAIN,
+        REFERENCE,
+        HOLDOUT,
+        DEFORM_MESHES[0],
+        DEFORM_MESHES[1],
+        DEFORM_MESHES[2],
+        SPACE,
+        PREVIEW,
+    ];
+
+    /// Writes the meshes, the space and the datasets into `out` (which must
+    /// exist); returns the training set.
+    ///
+    /// Cost: one ARAP solve per shape, per mesh it is written on.
+    ///
+    /// # Errors
+    /// [`DataError::Config`] for no training shapes; the deformation and
+    /// writing errors.
+    pub fn write(&self, out: &Path) -> Result<Dataset> {
+        let m = self.meshes;
+        for (file, mesh) in DEFORM_MESHES.iter().zip([&m.original, &m.coarse, &m.eval]) {
+            mfm_meshio::write_ply(out.join(file), mesh, &[])?;
+        }
+        write_space(&out.join(SPACE), self.space)?;
+        let set =
+            |dir: &str, mesh: &TriMesh, seed: u64, range: Range<usize>, role: &str, what: &str| {
+                deformations::write_dataset(
+                    &out.join(dir),
+                    mesh,
+                    self.space,
+                    seed,
+                    range,
+                    m.normalization,
+                    m.frame,
+                    role,
+                    &format!("mfm dataset deform: {what} of {}", self.source),
+                    self.progress,
+                )
+            };
+        let train = set(
+            TRAIN,
+            &m.coarse,
+            self.seed,
+            0..self.train,
+            "coarse",
+            "training shapes on the coarse mesh",
+        )?;
+        if self.reference > 0 {
+            let held_out = held_out_seed(self.seed);
+            set(
+                REFERENCE,
+                &m.eval,
+                held_out,
+                0..self.reference,
+                "eval",
+                "held-out shapes on the evaluation mesh",
+            )?;
+            set(
+                HOLDOUT,
+                &m.coarse,
+                held_out,
+                0..self.reference,
+                "coarse",
+                "held-out shapes on the coarse mesh",
+            )?;
+        }
+        Ok(train)
+    }
+}
+
+/// Writes a deformation space as pretty JSON ([`SPACE`]), atomically.
+///
+/// # Errors
+/// [`DataError::Io`] naming the file.
+pub fn write_space(path: &Path, space: &DeformSpace) -> Result<()> {
+    mfm_files::write_atomic(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, space).map_err(std::io::Error::other)?;
+        std::io::Write::write_all(w, b"\n")
+    })
+    .map_err(|e| match e {
+        mfm_files::FileError::Io { source, .. } => DataError::io(path, source),
+        other => DataError::format(path, other.to_string()),
+    })
+}
+
+/// Reads a deformation space ([`SPACE`] of a deformation experiment).
+///
+/// # Errors
+/// [`DataError::Io`] if it cannot be read, [`DataError::Format`] if it is
+/// not a deformation space.
+pub fn read_space(path: &Path) -> Result<DeformSpace> {
+    let text = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
+    serde_json::from_str(&text).map_err(|e| {
+        DataError::format(
+            path,
+            format!("not a deformation space (space.json of mfm dataset deform): {e}"),
+        )
+    })
+}
