@@ -3,7 +3,7 @@
 
 use crate::mesh_arg::load_mesh_checked;
 use crate::output::ensure_empty;
-use crate::pictures::{channel, save_grid};
+use crate::pictures::save_grid;
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use mfm_data::SignalSource;
@@ -253,7 +253,7 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
     .write(&a.out, &progress)?;
     let preview = train.load_all()?;
     let k = preview.len().min(8);
-    let values: Vec<Vec<f64>> = (0..k).map(|i| channel(&preview, i, 0)).collect();
+    let values: Vec<Vec<f64>> = (0..k).map(|i| preview.channel(i, 0)).collect();
     let panels: Vec<Panel<'_>> = values
         .iter()
         .enumerate()

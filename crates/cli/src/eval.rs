@@ -3,7 +3,7 @@
 
 use crate::mesh_arg::{load_mesh_checked, mesh_path};
 use crate::output::{prepare_outputs, write_json};
-use crate::pictures::{channel, save_grid};
+use crate::pictures::save_grid;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use mfm_data::dataset::Dataset;
@@ -238,7 +238,7 @@ fn save_data_and_samples(
     ] {
         for (i, f) in fits.iter().enumerate().take(set.len().min(k)) {
             values.push((
-                channel(set, i, 0),
+                set.channel(i, 0),
                 format!(
                     "{name} {i}\nres {:.2} peak {:.2} bumps {}",
                     f.residual, f.peak, f.bumps_above_half

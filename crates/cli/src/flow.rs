@@ -3,15 +3,18 @@
 
 use crate::mesh_arg::{load_mesh_checked, mesh_path};
 use crate::output::{ensure_empty, prepare_outputs, write_json};
-use crate::pictures::{channel, save_grid};
+use crate::pictures::save_grid;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use mfm_data::dataset::Dataset;
+use mfm_fm::SignalSource;
 use mfm_fm::checkpoint::CONFIG_FILE;
 use mfm_fm::config::{DeviceChoice, OdeMethod, RunConfig};
-use mfm_fm::sample::{SampleOptions, Sampler};
+use mfm_fm::sample::{
+    SAMPLE_FILES, SampleOptions, SampleRequest, SampleTiming, Sampler, is_sample_ply,
+    sample_ply_name,
+};
 use mfm_fm::train::Trainer;
-use mfm_fm::{InMemorySignals, SignalSource};
 use mfm_geometry::TriMesh;
 use mfm_render::{ColorRange, Panel};
 use std::path::{Path, PathBuf};
@@ -229,28 +232,8 @@ pub fn train(a: TrainArgs) -> Result<()> {
         trainer.step(),
         trainer.config().train.steps
     );
-    let flow = trainer.flow();
-    if !flow.frame.is_identity() {
-        let sh = flow.frame.shift;
-        println!(
-            "frame: p -> {:.4} p + [{:.4}, {:.4}, {:.4}] (bounding box centred, largest extent 1){}; noise {} x {}{}",
-            flow.frame.scale,
-            sh[0],
-            sh[1],
-            sh[2],
-            if flow.positions {
-                ", positions moved with it"
-            } else {
-                ""
-            },
-            flow.noise,
-            flow.noise_scale,
-            if flow.centered {
-                ", noise and targets centred"
-            } else {
-                ""
-            }
-        );
+    if let Some(line) = trainer.flow().frame_summary() {
+        println!("{line}");
     }
     let summary = match trainer.run(&stop, !a.quiet) {
         Ok(s) => s,
@@ -304,21 +287,6 @@ fn dataset_dir(flag: Option<&Path>, config: &RunConfig) -> Result<PathBuf> {
     }
 }
 
-/// The fixed names `mfm sample` writes into its folder (besides
-/// `sample_NNN.ply`).
-const SAMPLE_FILES: [&str; 4] = ["samples.npy", "mesh.ply", "samples.png", "timing.json"];
-
-/// Whether `name` is one of the `sample_NNN.ply` files of `mfm sample`.
-fn is_sample_ply(name: &str) -> bool {
-    name.strip_prefix("sample_")
-        .and_then(|r| r.strip_suffix(".ply"))
-        .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
-}
-
-/// Output values kept in memory at once while sampling (the rest goes
-/// straight to disk).
-const SAMPLE_CHUNK_BYTES: usize = 64 << 20;
-
 /// Runs `mfm sample`.
 pub fn sample(a: SampleArgs) -> Result<()> {
     if a.n == 0 {
@@ -368,7 +336,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     let n = a.n;
     let plys = a.ply.min(n);
     let mut outputs: Vec<PathBuf> = SAMPLE_FILES.iter().map(|f| a.out.join(f)).collect();
-    outputs.extend((0..plys).map(|i| a.out.join(format!("sample_{i:03}.ply"))));
+    outputs.extend((0..plys).map(|i| a.out.join(sample_ply_name(i))));
     let run_files = [
         CONFIG_FILE,
         mfm_fm::checkpoint::FLOW_FILE,
@@ -395,69 +363,33 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         }
     }
     let target = sampler.prepare(&mesh)?;
-    let row = v * c;
     let keep = n.min(a.ply.max(8));
-    let chunk = (SAMPLE_CHUNK_BYTES / (row * 4).max(1))
-        .max(opts.batch)
-        .min(n);
-    let mut file = mfm_files::npy::NpyStream::<f32>::create(&outputs[0], &shape)?;
-    let bar = if n > chunk {
-        indicatif::ProgressBar::new(n as u64)
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
-    let mut kept: Vec<f32> = Vec::with_capacity(keep * row);
-    let (mut seconds, mut noise_seconds) = (0.0, 0.0);
-    let mut first = 0;
-    while first < n {
-        let count = chunk.min(n - first);
-        let part = sampler.sample_on(&target, first, count, a.seed, &opts)?;
-        if let Some((i, vertex, channel, x)) = mfm_data::signals::first_non_finite(&part.data, v, c)
-        {
-            bail!(
-                "sample {} is not finite ({x} at vertex {vertex}, channel {channel}): the model in {} diverged; nothing was written",
-                first + i,
+    let streamed = sampler
+        .sample_to_npy(
+            &target,
+            &outputs[0],
+            SampleRequest {
+                count: n,
+                seed: a.seed,
+                keep,
+                progress: true,
+            },
+            &opts,
+        )
+        .with_context(|| {
+            format!(
+                "sampling the model in {}; nothing was written",
                 a.run.display()
-            );
-        }
-        let take = keep.saturating_sub(first).min(count);
-        kept.extend_from_slice(&part.data[..take * row]);
-        file.append(&part.data)?;
-        seconds += part.seconds;
-        noise_seconds += part.noise_seconds;
-        first += count;
-        bar.set_position(first as u64);
-    }
-    bar.finish_and_clear();
-    file.finish()?;
+            )
+        })?;
+    let (seconds, noise_seconds) = (streamed.seconds, streamed.noise_seconds);
+    let signals = streamed.first;
     mfm_meshio::write_ply(a.out.join("mesh.ply"), &mesh, &[])?;
-    let signals = InMemorySignals::new(kept, keep, v, c)?;
     for i in 0..plys {
-        let path = a.out.join(format!("sample_{i:03}.ply"));
-        if c == 3 {
-            // Three channels are vertex positions: write the deformed mesh.
-            mfm_meshio::write_ply(&path, &mesh.with_positions(signals.positions(i))?, &[])?;
-        } else {
-            let columns: Vec<Vec<f64>> = (0..c).map(|k| channel(&signals, i, k)).collect();
-            let names: Vec<String> = (0..c)
-                .map(|k| {
-                    if c == 1 {
-                        "signal".into()
-                    } else {
-                        format!("signal_{k}")
-                    }
-                })
-                .collect();
-            let scalars: Vec<(&str, &[f64])> = names
-                .iter()
-                .zip(&columns)
-                .map(|(name, col)| (name.as_str(), col.as_slice()))
-                .collect();
-            mfm_meshio::write_ply(&path, &mesh, &scalars)?;
-        }
+        signals.write_ply(i, &mesh, &a.out.join(sample_ply_name(i)))?;
     }
     let k = keep.min(8);
-    let values: Vec<Vec<f64>> = (0..k).map(|i| channel(&signals, i, 0)).collect();
+    let values: Vec<Vec<f64>> = (0..k).map(|i| signals.channel(i, 0)).collect();
     let deformed: Vec<TriMesh> = if c == 3 {
         (0..k)
             .map(|i| mesh.with_positions(signals.positions(i)))
@@ -482,17 +414,17 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         &a.out.join("samples.png"),
     )?;
     let per_sample = seconds / n as f64;
-    let timing = serde_json::json!({
-        "samples": n,
-        "vertices": v,
-        "channels": c,
-        "ode_steps": opts.steps,
-        "method": format!("{:?}", opts.method).to_lowercase(),
-        "seconds": seconds,
-        "noise_seconds": noise_seconds,
-        "seconds_per_sample": per_sample,
-    });
-    write_json(&a.out.join("timing.json"), &timing)?;
+    let timing = SampleTiming {
+        samples: n,
+        vertices: v,
+        channels: c,
+        ode_steps: opts.steps,
+        method: format!("{:?}", opts.method).to_lowercase(),
+        seconds,
+        noise_seconds,
+        seconds_per_sample: per_sample,
+    };
+    write_json(&a.out.join(SAMPLE_FILES[3]), &timing)?;
     undo.keep();
     println!(
         "{n} samples on {} vertices in {:.2} s ({:.1} ms per sample, {} {:?} steps) -> {}",

@@ -1,18 +1,8 @@
-//! Pictures the commands share: a grid of panels on one colour scale, and
-//! one channel of a signal as `f64` values to colour a mesh by.
+//! Pictures the commands share: a grid of panels on one colour scale.
 
 use anyhow::Result;
-use mfm_data::{InMemorySignals, SignalSource};
 use mfm_render::{ColorRange, GridOptions, Panel};
 use std::path::Path;
-
-/// Channel `k` of signal `i` as f64.
-pub(crate) fn channel(s: &InMemorySignals, i: usize, k: usize) -> Vec<f64> {
-    s.signal(i)
-        .chunks(s.channels())
-        .map(|x| f64::from(x[k]))
-        .collect()
-}
 
 /// Renders `panels` in a grid of `columns` with a title and colour bars
 /// and writes it as a PNG.

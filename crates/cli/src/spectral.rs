@@ -6,10 +6,9 @@ use crate::output::{prepare_outputs, write_json, write_npy};
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use mfm_geometry::operators::Operators;
-use mfm_noise::spectrum::compare;
-use mfm_noise::{
-    DEFAULT_TAU, NoiseKind, NoiseSampler, SpectralAnalyzer, SpectrumComparison, SpectrumReport,
-};
+use mfm_noise::spectrum::{MeshSpectrum, SpectrumFile, compare};
+use mfm_noise::stream;
+use mfm_noise::{DEFAULT_TAU, NoiseKind, NoiseSampler, SpectralAnalyzer, SpectrumComparison};
 use mfm_render::plots::{self, HistogramPanel, VarianceSeries};
 use mfm_render::{ColorRange, Colormap, RenderOptions, render_mesh, save_png};
 use mfm_solver::{EigenOptions, generalized_eigenpairs};
@@ -191,10 +190,6 @@ impl KindArgs {
     }
 }
 
-/// Samples per chunk when streaming many samples (bounds memory at
-/// `CHUNK * V * C` values).
-const CHUNK: usize = 256;
-
 fn progress(total: u64, what: &str) -> ProgressBar {
     let bar = ProgressBar::new(total);
     bar.set_style(
@@ -259,33 +254,14 @@ pub fn noise(
     let sampler = NoiseSampler::new(&mesh, kind)
         .with_context(|| format!("{spec}: cannot set up {kind} noise"))?;
     let setup = start.elapsed().as_secs_f64();
-    // Streamed to disk CHUNK samples at a time: memory stays at one chunk
-    // whatever the output's size.
-    let mut file = mfm_files::npy::NpyStream::<f64>::create(out, &shape)?;
+    // Streamed to disk a chunk at a time: memory stays at one chunk whatever
+    // the output's size.
     let bar = progress(samples as u64, "sampling");
-    let mass = sampler.mass();
-    let mut energy = 0.0;
-    let mut first_signal: Option<Vec<f64>> = None;
-    let mut first = 0;
-    while first < samples {
-        let count = CHUNK.min(samples - first);
-        let batch = sampler.sample_range(first, count, channels, seed)?;
-        for s in 0..count {
-            for c in 0..channels {
-                let f = batch.signal(s, c);
-                energy += f.iter().zip(mass).map(|(x, m)| m * x * x).sum::<f64>();
-            }
-        }
-        if first_signal.is_none() {
-            first_signal = Some(batch.signal(0, 0));
-        }
-        file.append(batch.data())?;
-        first += count;
-        bar.set_position(first as u64);
-    }
+    let written = stream::write_npy(&sampler, out, samples, channels, seed, |done| {
+        bar.set_position(done as u64)
+    })?;
     bar.finish_and_clear();
-    file.finish()?;
-    let mean_energy = energy / (samples * channels) as f64;
+    let mean_energy = written.mean_energy;
     let summary = NoiseSummary {
         mesh: spec,
         kind,
@@ -315,32 +291,12 @@ mean f^T M f = {mean_energy:.4e}; wrote {} and {}",
             range: ColorRange::Symmetric,
             ..Default::default()
         };
-        let first = first_signal.unwrap_or_default();
-        let img = render_mesh(&mesh, Some(&first), &opts)?;
+        let img = render_mesh(&mesh, Some(&written.first_signal), &opts)?;
         save_png(&img, png)?;
         println!("wrote {}", png.display());
     }
     undo.keep();
     Ok(())
-}
-
-#[derive(serde::Serialize)]
-struct MeshSpectrum {
-    mesh: String,
-    vertices: usize,
-    gamma: f64,
-    report: SpectrumReport,
-}
-
-#[derive(serde::Serialize)]
-struct SpectrumFile {
-    kind: NoiseKind,
-    samples: usize,
-    k: usize,
-    seed: u64,
-    meshes: Vec<MeshSpectrum>,
-    /// Each later mesh against the first, frequency by frequency.
-    comparisons: Vec<SpectrumComparison>,
 }
 
 /// Options of `mfm spectrum`.
@@ -397,13 +353,18 @@ pub fn spectrum(args: &SpectrumArgs<'_>) -> Result<()> {
         let theory = sampler.theory(&pairs)?;
         let mut analyzer = SpectralAnalyzer::new(&pairs, &ops.mass)?.keep(args.coefficients);
         let bar = progress(args.samples as u64, spec);
-        let mut first = 0;
-        while first < args.samples {
-            let count = CHUNK.min(args.samples - first);
-            analyzer.add(&sampler.sample_range(first, count, 1, args.seed)?)?;
-            first += count;
-            bar.set_position(first as u64);
-        }
+        stream::for_each_chunk(
+            &sampler,
+            args.samples,
+            1,
+            args.seed,
+            stream::CHUNK,
+            |batch, first| {
+                analyzer.add(batch)?;
+                bar.set_position((first + batch.samples()) as u64);
+                Ok(())
+            },
+        )?;
         bar.finish_and_clear();
         let report = analyzer.report(Some(&theory))?;
         println!(

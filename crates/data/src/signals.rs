@@ -1,6 +1,10 @@
 //! [`SignalSource`]: where training reads its signals from, one batch at a
 //! time, without holding a large dataset in memory.
 
+use std::path::Path;
+
+use mfm_geometry::TriMesh;
+
 use crate::error::{DataError, Result};
 
 /// A set of `len()` signals over one mesh, each `num_vertices() x channels()`
@@ -140,6 +144,60 @@ impl InMemorySignals {
             .chunks_exact(3)
             .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
             .collect()
+    }
+
+    /// Channel `k` of signal `i` as `f64` (`V` values), e.g. to colour a
+    /// mesh by.
+    pub fn channel(&self, i: usize, k: usize) -> Vec<f64> {
+        self.signal(i)
+            .chunks(self.channels)
+            .map(|x| f64::from(x[k]))
+            .collect()
+    }
+
+    /// Writes signal `i` on `mesh` as a PLY file: a 3-channel signal as the
+    /// mesh moved to those positions, any other as per-vertex properties
+    /// `signal` (one channel) or `signal_0, signal_1, ...`.
+    ///
+    /// # Errors
+    /// [`DataError::SizeMismatch`] when `mesh` does not have the signals'
+    /// vertices; the writer's errors.
+    pub fn write_ply(&self, i: usize, mesh: &TriMesh, path: &Path) -> Result<()> {
+        if mesh.num_vertices() != self.vertices {
+            return Err(DataError::SizeMismatch {
+                what: "vertices of the mesh the signals are written on".into(),
+                expected: self.vertices,
+                found: mesh.num_vertices(),
+            });
+        }
+        let c = self.channels;
+        if c == 3 {
+            let moved =
+                mesh.with_positions(self.positions(i))
+                    .map_err(|e| DataError::MeshProcessing {
+                        what: format!("signal {i} as positions"),
+                        source: Box::new(e),
+                    })?;
+            mfm_meshio::write_ply(path, &moved, &[])?;
+        } else {
+            let columns: Vec<Vec<f64>> = (0..c).map(|k| self.channel(i, k)).collect();
+            let names: Vec<String> = (0..c)
+                .map(|k| {
+                    if c == 1 {
+                        "signal".into()
+                    } else {
+                        format!("signal_{k}")
+                    }
+                })
+                .collect();
+            let scalars: Vec<(&str, &[f64])> = names
+                .iter()
+                .zip(&columns)
+                .map(|(name, col)| (name.as_str(), col.as_slice()))
+                .collect();
+            mfm_meshio::write_ply(path, mesh, &scalars)?;
+        }
+        Ok(())
     }
 }
 

@@ -105,6 +105,34 @@ pub struct FlowSpec {
 }
 
 impl FlowSpec {
+    /// One line on the frame and the noise, for a run's log (`None` when
+    /// the data is trained as it is, in the identity frame).
+    pub fn frame_summary(&self) -> Option<String> {
+        if self.frame.is_identity() {
+            return None;
+        }
+        let sh = self.frame.shift;
+        Some(format!(
+            "frame: p -> {:.4} p + [{:.4}, {:.4}, {:.4}] (bounding box centred, largest extent 1){}; noise {} x {}{}",
+            self.frame.scale,
+            sh[0],
+            sh[1],
+            sh[2],
+            if self.positions {
+                ", positions moved with it"
+            } else {
+                ""
+            },
+            self.noise,
+            self.noise_scale,
+            if self.centered {
+                ", noise and targets centred"
+            } else {
+                ""
+            }
+        ))
+    }
+
     /// Reads a `flow.json`.
     ///
     /// # Errors

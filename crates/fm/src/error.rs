@@ -77,9 +77,12 @@ pub enum FmError {
     /// An error reported by libtorch outside the network.
     #[error("libtorch: {0}")]
     Torch(#[from] tch::TchError),
-    /// A dataset, signal, geodesic or metric error ([`mfm_data`]).
+    /// A dataset, signal or metric error ([`mfm_data`]).
     #[error(transparent)]
     Data(#[from] mfm_data::DataError),
+    /// An output file could not be written ([`mfm_files`]).
+    #[error(transparent)]
+    Files(#[from] mfm_files::FileError),
 }
 
 impl FmError {

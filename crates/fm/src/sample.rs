@@ -48,6 +48,7 @@ use crate::checkpoint::{self, FLOW_FILE, FlowSpec, WEIGHTS_FILE};
 use crate::config::{DeviceChoice, OdeMethod, SampleConfig};
 use crate::context::MeshContext;
 use crate::error::{FmError, Result};
+use crate::signals::InMemorySignals;
 
 /// Relative size difference above which [`Sampler::surface_warnings`]
 /// speaks up.
@@ -78,6 +79,72 @@ impl From<&SampleConfig> for SampleOptions {
             batch: c.batch,
         }
     }
+}
+
+/// The fixed names `mfm sample` writes into its output folder, besides the
+/// [`sample_ply_name`] files: the samples (`.npy`), the mesh, a picture and
+/// the [`SampleTiming`].
+pub const SAMPLE_FILES: [&str; 4] = ["samples.npy", "mesh.ply", "samples.png", "timing.json"];
+
+/// The PLY file of sample `i` in a sample folder (`sample_007.ply`).
+pub fn sample_ply_name(i: usize) -> String {
+    format!("sample_{i:03}.ply")
+}
+
+/// Whether `name` is a [`sample_ply_name`] (`sample_` digits `.ply`).
+pub fn is_sample_ply(name: &str) -> bool {
+    name.strip_prefix("sample_")
+        .and_then(|r| r.strip_suffix(".ply"))
+        .is_some_and(|d| !d.is_empty() && d.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// How long a sampling run took (`timing.json` of a sample folder).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SampleTiming {
+    /// Samples drawn.
+    pub samples: usize,
+    /// Vertices of the target mesh.
+    pub vertices: usize,
+    /// Channels per vertex.
+    pub channels: usize,
+    /// ODE steps per sample.
+    pub ode_steps: usize,
+    /// The ODE method (`euler`, `midpoint`...).
+    pub method: String,
+    /// Wall seconds for everything.
+    pub seconds: f64,
+    /// Of which drawing the noise.
+    pub noise_seconds: f64,
+    /// `seconds / samples`.
+    pub seconds_per_sample: f64,
+}
+
+/// The most bytes of samples [`Sampler::sample_to_npy`] computes before
+/// writing them.
+pub const SAMPLE_CHUNK_BYTES: usize = 64 << 20;
+
+/// What [`Sampler::sample_to_npy`] draws.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SampleRequest {
+    /// Samples `0..count` of the seed's sequence.
+    pub count: usize,
+    /// The seed.
+    pub seed: u64,
+    /// How many of the first samples to return in memory.
+    pub keep: usize,
+    /// Show a progress bar (when there is more than one chunk).
+    pub progress: bool,
+}
+
+/// What [`Sampler::sample_to_npy`] returns.
+#[derive(Clone, Debug)]
+pub struct StreamedSamples {
+    /// The first samples (as many as asked to keep).
+    pub first: InMemorySignals,
+    /// Wall seconds for everything (noise and integration).
+    pub seconds: f64,
+    /// Of which drawing the noise.
+    pub noise_seconds: f64,
 }
 
 /// Generated signals and how long they took.
@@ -391,6 +458,76 @@ impl Sampler {
             vertices: v,
             channels: c,
             seconds: start.elapsed().as_secs_f64(),
+            noise_seconds,
+        })
+    }
+
+    /// Generates samples `0..request.count` of `request.seed` on `target`
+    /// and streams them to the `.npy` file `path` (`[count, V, C]` `f32`,
+    /// written atomically), at most [`SAMPLE_CHUNK_BYTES`] at a time (at
+    /// least one batch), keeping the first `request.keep` in memory for
+    /// pictures and meshes.
+    ///
+    /// A sample with a non-finite value stops the run before it is written
+    /// and the file is not created.
+    ///
+    /// # Errors
+    /// [`FmError::Diverged`] naming the sample, vertex and channel; the
+    /// errors of [`Sampler::sample_on`] and of the file.
+    pub fn sample_to_npy(
+        &self,
+        target: &TargetMesh,
+        path: &Path,
+        request: SampleRequest,
+        options: &SampleOptions,
+    ) -> Result<StreamedSamples> {
+        let SampleRequest {
+            count: n,
+            seed,
+            keep,
+            progress,
+        } = request;
+        let (v, c) = (target.num_vertices(), self.flow.channels);
+        let row = v * c;
+        let keep = keep.min(n);
+        let chunk = (SAMPLE_CHUNK_BYTES / (row * 4).max(1))
+            .max(options.batch)
+            .min(n)
+            .max(1);
+        let shape = [n as u64, v as u64, c as u64];
+        let mut file = mfm_files::npy::NpyStream::<f32>::create(path, &shape)?;
+        let bar = if progress && n > chunk {
+            indicatif::ProgressBar::new(n as u64)
+        } else {
+            indicatif::ProgressBar::hidden()
+        };
+        let mut kept: Vec<f32> = Vec::with_capacity(keep * row);
+        let (mut seconds, mut noise_seconds) = (0.0, 0.0);
+        let mut first = 0;
+        while first < n {
+            let count = chunk.min(n - first);
+            let part = self.sample_on(target, first, count, seed, options)?;
+            if let Some((i, vertex, channel, value)) =
+                mfm_data::signals::first_non_finite(&part.data, v, c)
+            {
+                return Err(FmError::Diverged(format!(
+                    "sample {} is not finite ({value} at vertex {vertex}, channel {channel}): the model diverged",
+                    first + i
+                )));
+            }
+            let take = keep.saturating_sub(first).min(count);
+            kept.extend_from_slice(&part.data[..take * row]);
+            file.append(&part.data)?;
+            seconds += part.seconds;
+            noise_seconds += part.noise_seconds;
+            first += count;
+            bar.set_position(first as u64);
+        }
+        bar.finish_and_clear();
+        file.finish()?;
+        Ok(StreamedSamples {
+            first: InMemorySignals::new(kept, keep, v, c)?,
+            seconds,
             noise_seconds,
         })
     }

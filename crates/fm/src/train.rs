@@ -526,7 +526,9 @@ impl Trainer {
         Self::start(run_dir, config, frame, mesh, signals)
     }
 
-    /// Resolves and writes the flow spec of a fresh run, then builds it.
+    /// Resolves and writes the flow spec of a fresh run (from
+    /// [`Trainer::new`], or [`Trainer::resume`] on a folder without
+    /// checkpoints), then builds it.
     fn start(
         run_dir: PathBuf,
         config: RunConfig,
@@ -606,7 +608,10 @@ impl Trainer {
                 return Err(err);
             }
             let config = with_device(RunConfig::from_toml_file(run_dir.join(CONFIG_FILE))?);
-            let mut t = Self::new_in_existing(run_dir, config, mesh, signals)?;
+            config.validate()?;
+            check_signals(mesh, signals.as_ref())?;
+            let frame = TrainingFrame::resolve(&config, mesh, signals.channels())?;
+            let mut t = Self::start(run_dir, config, frame, mesh, signals)?;
             t.resumed = Some(ResumeInfo {
                 checkpoint: None,
                 step: 0,
@@ -645,19 +650,6 @@ impl Trainer {
             skipped,
         });
         Ok(t)
-    }
-
-    /// [`Trainer::new`] for a folder that has a config but no checkpoint.
-    fn new_in_existing(
-        run_dir: PathBuf,
-        config: RunConfig,
-        mesh: &TriMesh,
-        signals: Arc<dyn SignalSource>,
-    ) -> Result<Self> {
-        config.validate()?;
-        check_signals(mesh, signals.as_ref())?;
-        let frame = TrainingFrame::resolve(&config, mesh, signals.channels())?;
-        Self::start(run_dir, config, frame, mesh, signals)
     }
 
     /// Builds a run from its flow spec; `mesh`, `signals` and `context` are

@@ -3,7 +3,7 @@
 //! Laplacian's null space, symmetry and sparsity, scale behaviour, and
 //! hand-computed values on small meshes.
 //!
-//! Nothing here needs Python; the shared meshes are read with `mfm_geometry::io`.
+//! Nothing here needs Python; the shared meshes are read with `mfm_meshio`.
 
 use std::collections::HashMap;
 

@@ -56,6 +56,10 @@ pub enum NoiseError {
     #[error("cannot build the mesh operators: {0}")]
     Operators(#[from] OperatorError),
 
+    /// An output file could not be written.
+    #[error(transparent)]
+    File(#[from] mfm_files::FileError),
+
     /// A factorization, solve or eigensolve failed.
     #[error("linear algebra failed: {0}")]
     Solver(#[from] SolverError),

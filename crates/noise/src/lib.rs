@@ -13,6 +13,8 @@
 //!   when `tau = 0` — or eigenpairs), then [`NoiseSampler::sample`] draws a
 //!   [`NoiseBatch`] `[samples, vertices, channels]` from a seed, bit-identically
 //!   for any thread count.
+//! - [`stream`]: any number of samples in bounded memory, chunk by chunk,
+//!   to a consumer or straight into an `.npy` file.
 //! - [`spectrum`]: coefficients `c_i = phi_i^T M f`, empirical against
 //!   theoretical `Var(c_i)`, independence, per-frequency W2 between meshes,
 //!   energy; a serializable [`SpectrumReport`].
@@ -48,6 +50,7 @@ pub mod kind;
 mod rng;
 pub mod sampler;
 pub mod spectrum;
+pub mod stream;
 
 pub use error::{NoiseError, Result};
 pub use kind::{DEFAULT_TAU, NoiseKind};

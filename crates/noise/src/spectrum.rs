@@ -91,6 +91,16 @@ pub struct Theory {
     pub energy: Option<f64>,
 }
 
+/// `E[f^T M f]` of the kinds whose expected energy needs no eigenpairs:
+/// naive `sum_v m_v` (the surface area), white `V`; `None` for the others.
+pub fn eigenpair_free_energy(kind: NoiseKind, mass: &[f64]) -> Option<f64> {
+    match kind {
+        NoiseKind::Naive => Some(mass.iter().sum()),
+        NoiseKind::White => Some(mass.len() as f64),
+        _ => None,
+    }
+}
+
 impl Theory {
     /// The closed forms of `kind` on the mesh with eigenpairs `pairs`, mass
     /// `mass` and `gamma = ||M^-1 L||_F`.
@@ -100,12 +110,10 @@ impl Theory {
     pub fn new(kind: NoiseKind, pairs: &Eigenpairs, mass: &[f64], gamma: f64) -> Result<Self> {
         let variance = theoretical_variance(kind, pairs, mass, gamma)?;
         let energy = match kind {
-            NoiseKind::Naive => Some(mass.iter().sum()),
-            NoiseKind::White => Some(mass.len() as f64),
             NoiseKind::Explicit { k, .. } if k <= pairs.values.len() => {
                 Some(variance.iter().take(k).sum())
             }
-            _ => None,
+            _ => eigenpair_free_energy(kind, mass),
         };
         Ok(Self {
             kind,
@@ -537,6 +545,37 @@ pub fn analyze(
     let mut a = SpectralAnalyzer::new(pairs, mass)?;
     a.add(batch)?;
     a.report(theory)
+}
+
+/// The spectrum of one mesh in a [`SpectrumFile`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeshSpectrum {
+    /// The mesh as the user named it (a path or a builtin).
+    pub mesh: String,
+    /// Its vertex count.
+    pub vertices: usize,
+    /// `Gamma = ||M^-1 L||_F` of the mesh.
+    pub gamma: f64,
+    /// The empirical spectrum against the theory.
+    pub report: SpectrumReport,
+}
+
+/// The report of `mfm spectrum`: one noise kind's spectrum on several
+/// meshes, each later mesh compared with the first.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SpectrumFile {
+    /// The noise kind.
+    pub kind: NoiseKind,
+    /// Samples per mesh.
+    pub samples: usize,
+    /// Eigenpairs per mesh.
+    pub k: usize,
+    /// The seed (the same sample indices on every mesh).
+    pub seed: u64,
+    /// The meshes, in the order given.
+    pub meshes: Vec<MeshSpectrum>,
+    /// Each later mesh against the first, frequency by frequency.
+    pub comparisons: Vec<SpectrumComparison>,
 }
 
 /// One frequency of a [`SpectrumComparison`].

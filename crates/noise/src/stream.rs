@@ -1,0 +1,117 @@
+//! Many samples without holding them all: samples `0..N` of a seed are
+//! drawn in chunks ([`CHUNK`] samples unless asked otherwise) and handed,
+//! in order, to a
+//! consumer (an `.npy` file, a [`SpectralAnalyzer`](crate::SpectralAnalyzer),
+//! a statistic). Memory stays at one chunk, `chunk x V x C` values, whatever
+//! `N` is, and the values are the same bits as one [`NoiseSampler::sample`]
+//! call (samples are indexed, not drawn in sequence). Statistics summed per
+//! chunk depend on the chunk size in their last bits.
+//!
+//! # Example
+//! ```
+//! use mfm_geometry::procedural;
+//! use mfm_noise::{NoiseKind, NoiseSampler, stream};
+//! let sampler = NoiseSampler::new(&procedural::icosphere(2), NoiseKind::White).unwrap();
+//! let mut seen = 0;
+//! stream::for_each_chunk(&sampler, 600, 1, 7, stream::CHUNK, |batch, first| {
+//!     assert_eq!(first, seen);
+//!     seen += batch.samples();
+//!     Ok(())
+//! })
+//! .unwrap();
+//! assert_eq!(seen, 600);
+//! ```
+
+use std::path::Path;
+
+use crate::error::{NoiseError, Result};
+use crate::sampler::{NoiseBatch, NoiseSampler};
+
+/// Samples per chunk of [`write_npy`] (and the cli's spectra).
+pub const CHUNK: usize = 256;
+
+/// Calls `each(batch, first)` for `[count, V, channels]` batches that cover
+/// samples `0..samples` of `seed` in order (`first` is the batch's first
+/// sample index, `count <= chunk`); stops at the first error.
+///
+/// # Errors
+/// The sampler's errors and those `each` returns.
+pub fn for_each_chunk(
+    sampler: &NoiseSampler,
+    samples: usize,
+    channels: usize,
+    seed: u64,
+    chunk: usize,
+    mut each: impl FnMut(&NoiseBatch, usize) -> Result<()>,
+) -> Result<()> {
+    let chunk = chunk.max(1);
+    let mut first = 0;
+    while first < samples {
+        let count = chunk.min(samples - first);
+        let batch = sampler.sample_range(first, count, channels, seed)?;
+        each(&batch, first)?;
+        first += count;
+    }
+    Ok(())
+}
+
+/// What [`write_npy`] measured on the way.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WrittenNoise {
+    /// Mean over samples and channels of the energy `f^T M f`.
+    pub mean_energy: f64,
+    /// Channel 0 of sample 0 (for a picture).
+    pub first_signal: Vec<f64>,
+}
+
+/// Writes samples `0..samples` of `seed` (`channels` each) to the `.npy`
+/// file `path`, `[samples, V, channels]` row-major `f64`, atomically;
+/// `progress(done)` is called after each chunk.
+///
+/// # Errors
+/// [`NoiseError::InvalidParameter`] for no samples; the sampler's errors;
+/// [`NoiseError::File`] naming the file.
+pub fn write_npy(
+    sampler: &NoiseSampler,
+    path: &Path,
+    samples: usize,
+    channels: usize,
+    seed: u64,
+    mut progress: impl FnMut(usize),
+) -> Result<WrittenNoise> {
+    if samples == 0 {
+        return Err(NoiseError::InvalidParameter {
+            name: "samples",
+            expected: ">= 1",
+            found: "0".into(),
+        });
+    }
+    let shape = [
+        samples as u64,
+        sampler.num_vertices() as u64,
+        channels as u64,
+    ];
+    let mut file = mfm_files::npy::NpyStream::<f64>::create(path, &shape)?;
+    let mass = sampler.mass();
+    let mut energy = 0.0;
+    let mut first_signal = Vec::new();
+    for_each_chunk(sampler, samples, channels, seed, CHUNK, |batch, first| {
+        for s in 0..batch.samples() {
+            for c in 0..channels {
+                let f = batch.signal(s, c);
+                energy += f.iter().zip(mass).map(|(x, m)| m * x * x).sum::<f64>();
+            }
+        }
+        if first == 0 {
+            first_signal = batch.signal(0, 0);
+        }
+        file.append(batch.data())?;
+        progress(first + batch.samples());
+        Ok(())
+    })?;
+    file.finish()?;
+    Ok(WrittenNoise {
+        mean_energy: energy / (samples * channels) as f64,
+        first_signal,
+    })
+}
