@@ -3,7 +3,8 @@
 //! - `setup`: create (once) the Python environment with the pinned torch whose
 //!   libtorch `tch` links against, and the test oracles; print the variables to
 //!   export for plain `cargo` use.
-//! - `test`: setup, then every test of the workspace (oracle tests may not skip).
+//! - `test`: setup, then every test of the workspace (oracle tests may not skip);
+//!   without arguments also the `no-network` check.
 //! - `lint`: `cargo fmt --check` and `cargo clippy --all-targets -D warnings`.
 //! - `no-network`: `mfm` built without libtorch links none and runs.
 //! - `demo`: the main job on a built-in default.
@@ -217,7 +218,13 @@ fn main() -> Result<()> {
             run(cargo(&env)
                 .args(["test", "--workspace"])
                 .args(&args)
-                .env("MFM_REQUIRE_ORACLES", "1"))
+                .env("MFM_REQUIRE_ORACLES", "1"))?;
+            // the whole suite also checks that `mfm` builds and runs without
+            // libtorch (a selection of tests, with arguments, does not)
+            if args.is_empty() {
+                no_network::check()?;
+            }
+            Ok(())
         }
         Cmd::NoNetwork => no_network::check(),
         Cmd::Lint => {
