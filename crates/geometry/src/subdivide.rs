@@ -11,7 +11,7 @@
 //!
 //! [`SubdivisionMap`] records which two vertices each new vertex was inserted
 //! between, which is enough to carry piecewise-linear data to the finer mesh
-//! ([`SubdivisionMap::prolong`]); [`crate::refine`] returns the same map.
+//! ([`SubdivisionMap::prolong`]); `mfm_processing::refine` returns the same map.
 //!
 //! # Example
 //! ```
@@ -36,7 +36,7 @@ use crate::topology::Topology;
 /// every later vertex `num_coarse_vertices + i` was inserted at the midpoint
 /// of the edge between `parents()[i][0]` and `parents()[i][1]`, two vertices
 /// with smaller indices (coarse ones, or earlier new ones after
-/// [`crate::refine`]).
+/// `mfm_processing::refine`).
 ///
 /// For [`loop_subdivision`] the new positions are smoothed, but the map still
 /// says which edge each new vertex belongs to.
@@ -79,7 +79,7 @@ impl SubdivisionMap {
 
     /// Interpolates one value per coarse vertex linearly onto the fine mesh:
     /// coarse vertices keep their value, a new vertex gets the mean of its
-    /// parents'. For [`midpoint`] and [`crate::refine`] this is exact for
+    /// parents'. For [`midpoint`] and `mfm_processing::refine` this is exact for
     /// functions that are linear on each coarse face. `O(V')`.
     ///
     /// # Errors

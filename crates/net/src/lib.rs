@@ -15,12 +15,15 @@
 //!   [`autograd::apply_linear`]); why a C++ shim instead of splitting graphs.
 //! - [`mesh`]: [`MeshTensors`], one mesh's `G`, `G^T`, face means, mass
 //!   means and the cached Cholesky factor of `L + eps I` as differentiable ops.
-//! - [`model`]: [`PoissonNet`] and its layers; [`config`]: [`PoissonNetConfig`]
-//!   with the presets `paper`, `medium`, `small`.
-//! - [`dense`]: `linear` layers and the complex layers' products with faer's
-//!   matrix products.
-//! - [`fused`]: fused CPU kernels for the modulation and the magnitude
-//!   nonlinearity (with their torch reference implementations).
+//! - [`layers`]: one file per layer kind (complex linear, vector MLP,
+//!   vertex MLP, Poisson block); [`model`]: [`PoissonNet`] assembling them;
+//!   [`config`]: [`PoissonNetConfig`] with the presets `paper`, `medium`,
+//!   `small`.
+//! - [`kernels`]: the CPU kernels under the layers: [`kernels::dense`]
+//!   (`linear` layers and the complex layers' products with faer's matrix
+//!   products), [`kernels::fused`] (fused kernels for the modulation and the
+//!   magnitude nonlinearity, with their torch reference implementations),
+//!   the mesh operators' gather kernels and fast `f32` math.
 //! - [`loss`]: mass- and area-weighted MSE, the flow-matching loss.
 //! - [`mod@bench`]: [`bench::bench_training_step`] (what `mfm net bench` runs);
 //!   [`profile`]: per-section timers.
@@ -61,10 +64,10 @@
 //!   ([`PoissonNetConfig::forward_product_flops`] is the cost model; a test
 //!   checks it against the products the layers run,
 //!   [`kernels::dense::counted_product_flops`]);
-//! - dense layers use faer's GEMM ([`dense`]), ~15-25% faster per core than
+//! - dense layers use faer's GEMM ([`kernels::dense`]), ~15-25% faster per core than
 //!   the MKL inside the torch wheel on the AMD benchmark machine;
 //! - the modulation and the magnitude nonlinearity are single-pass fused
-//!   kernels in `f32` ([`fused`]), 2-3x less time than the torch graph;
+//!   kernels in `f32` ([`kernels::fused`]), 2-3x less time than the torch graph;
 //! - `G`, `G^T A2`, face means are gather kernels ([`mesh`]); the first
 //!   modulation layer runs on vertices (exact rewrite, see [`model`]);
 //! - Rust kernels run on libtorch's own intra-op threads

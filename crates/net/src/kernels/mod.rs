@@ -1,7 +1,7 @@
 //! The CPU kernels under the network's layers, apart from the layers that
 //! use them (`crate::layers`) so that a reader finds the math there first.
 //!
-//! - [`gather`]: the mesh operators' gather kernels (`G`, `G^T A2`, face
+//! - `gather`: the mesh operators' gather kernels (`G`, `G^T A2`, face
 //!   means, the paired divergence), AVX2 + FMA dispatch and prefetch;
 //! - [`dense`]: `linear` and the complex layers' products on faer's GEMM
 //!   (three real products per complex one from 64 channels), as autograd
@@ -12,7 +12,7 @@
 //!
 //! All of them write disjoint output rows from libtorch's intra-op threads
 //! ([`crate::autograd::parallel_for`]) through the one pointer wrapper
-//! [`SyncPtr`], and are generic over the one element trait [`Scalar`]
+//! `SyncPtr`, and are generic over the one element trait `Scalar`
 //! (`f32`, `f64`). Results do not depend on the number of threads.
 
 pub mod dense;
