@@ -293,9 +293,25 @@ impl LaplacianSolver {
     /// `growth <= 1`, `max_attempts == 0`), [`SolverError::ShiftExhausted`]
     /// (carrying the last factorization error).
     pub fn with_options(l: &SparseColMat<usize, f64>, opts: &ShiftOptions) -> Result<Self> {
-        let n = check_square(l.nrows(), l.ncols())?;
+        check_square(l.nrows(), l.ncols())?;
         let symbolic = Arc::new(SymbolicAnalysis::new(l.symbolic())?);
-        let lower_l = lower_values_of(&symbolic, l)?;
+        Self::with_symbolic(&symbolic, l, opts)
+    }
+
+    /// [`LaplacianSolver::with_options`] reusing a symbolic analysis of
+    /// `L`'s pattern (e.g. [`ScreenedPoisson::symbolic`] of a Matérn noise
+    /// sampler on the same mesh): only the numeric factorizations run, and
+    /// the factor is the same bits as with a fresh analysis.
+    ///
+    /// Errors: as [`LaplacianSolver::with_options`], plus
+    /// [`SolverError::PatternMismatch`].
+    pub fn with_symbolic(
+        symbolic: &Arc<SymbolicAnalysis>,
+        l: &SparseColMat<usize, f64>,
+        opts: &ShiftOptions,
+    ) -> Result<Self> {
+        let n = check_square(l.nrows(), l.ncols())?;
+        let lower_l = lower_values_of(symbolic, l)?;
         let mean_diag = if n == 0 {
             1.0
         } else {
@@ -331,7 +347,7 @@ impl LaplacianSolver {
         }
         let mut last_error = None;
         for attempt in 1..=opts.max_attempts {
-            match factor_shifted(&symbolic, &lower_l, |_| 1.0, eps, &opts.factor) {
+            match factor_shifted(symbolic, &lower_l, |_| 1.0, eps, &opts.factor) {
                 Ok(factor) => {
                     return Ok(Self {
                         factor,

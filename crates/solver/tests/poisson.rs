@@ -172,6 +172,38 @@ fn laplacian_solver_grows_the_shift_on_a_singular_laplacian() {
 }
 
 #[test]
+fn laplacian_solver_with_a_shared_symbolic_analysis_is_the_same_factor() {
+    let (l, m) = common::torus_operators(900);
+    let screened = ScreenedPoisson::new(&l, &m, 100.0).expect("SPD");
+    let opts = ShiftOptions {
+        initial: Shift::Absolute(0.0),
+        ..ShiftOptions::default()
+    };
+    let shared = LaplacianSolver::with_symbolic(screened.symbolic(), &l, &opts).expect("SPD");
+    let fresh = LaplacianSolver::with_options(&l, &opts).expect("SPD");
+    // the analysis is reused, not copied, and the shift search is the same
+    assert!(std::sync::Arc::ptr_eq(
+        shared.factor().symbolic(),
+        screened.symbolic()
+    ));
+    assert_eq!(
+        (shared.eps(), shared.attempts()),
+        (fresh.eps(), fresh.attempts())
+    );
+    let b = rhs(l.nrows(), 3, 5);
+    let xs = shared.solve_many(b.as_ref()).expect("solve");
+    let xf = fresh.solve_many(b.as_ref()).expect("solve");
+    assert_eq!((&xs - &xf).norm_max(), 0.0);
+    // an analysis of another pattern is refused
+    let (other, _) = common::torus_operators(400);
+    let foreign = ScreenedPoisson::analyse(&other).expect("square");
+    assert!(matches!(
+        LaplacianSolver::with_symbolic(&foreign, &l, &opts),
+        Err(SolverError::SizeMismatch { .. } | SolverError::PatternMismatch { .. })
+    ));
+}
+
+#[test]
 fn laplacian_solver_reports_exhaustion_with_the_last_shift() {
     // negative definite: no small shift helps
     let n = 10;
