@@ -5,9 +5,10 @@
 //! the noise's `L + tau M`, so only its numeric factorization runs.
 //!
 //! Cost: the operators (`O(V + F)`), the noise sampler's factorization (of
-//! `L + tau M` for Matérn noise) and the network's factor of `L + eps I`.
-//! The results are the same bits as building the sampler and the tensors
-//! each from the mesh.
+//! `L + tau M` for Matérn noise) and the numeric factorization of the
+//! network's `L + eps I` (with its own symbolic analysis when the noise
+//! has no factor). The results are the same bits as building the sampler
+//! and the tensors each from the mesh.
 
 use std::sync::Arc;
 
