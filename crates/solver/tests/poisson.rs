@@ -194,6 +194,22 @@ fn laplacian_solver_with_a_shared_symbolic_analysis_is_the_same_factor() {
     let xs = shared.solve_many(b.as_ref()).expect("solve");
     let xf = fresh.solve_many(b.as_ref()).expect("solve");
     assert_eq!((&xs - &xf).norm_max(), 0.0);
+    // another shape of the same connectivity (a posed copy of a mesh): the
+    // analysis of the first serves, with the bits of a fresh one
+    let (p, f) = common::torus(30, 15, 1.3, 0.5, 0.1);
+    let (p0, _) = common::torus(30, 15, 1.0, 0.4, 0.3);
+    let (l1, l0) = (
+        common::cotan_laplacian(&p, &f),
+        common::cotan_laplacian(&p0, &f),
+    );
+    let first = LaplacianSolver::new(&l0).expect("SPD");
+    let posed = LaplacianSolver::with_symbolic(first.factor().symbolic(), &l1, &opts).expect("SPD");
+    let alone = LaplacianSolver::with_options(&l1, &opts).expect("SPD");
+    let b = rhs(l1.nrows(), 2, 8);
+    let xp = posed.solve_many(b.as_ref()).expect("solve");
+    let xa = alone.solve_many(b.as_ref()).expect("solve");
+    assert_eq!((&xp - &xa).norm_max(), 0.0);
+    assert!((&xp - &first.solve_many(b.as_ref()).expect("solve")).norm_l2() > 1e-6 * xa.norm_l2());
     // an analysis of another pattern is refused
     let (other, _) = common::torus_operators(400);
     let foreign = ScreenedPoisson::analyse(&other).expect("square");
