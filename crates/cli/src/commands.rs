@@ -51,8 +51,8 @@ pub enum Command {
         #[arg(long, default_value_t = 800)]
         size: u32,
     },
-    /// The K smallest eigenpairs of L phi = lambda M phi: eigenvalues.npy [K],
-    /// eigenvectors.npy [V, K] (M-orthonormal columns), summary.json.
+    /// The K smallest eigenpairs of L phi = lambda M phi: eigenvalues.npy (K
+    /// values), eigenvectors.npy (V x K, M-orthonormal columns), summary.json.
     Eigs {
         /// Mesh file or builtin:NAME.
         mesh: String,

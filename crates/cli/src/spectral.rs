@@ -105,8 +105,8 @@ pub enum KindName {
 /// (`--kind matern --tau 100`).
 #[derive(clap::Args, Clone, Debug)]
 pub struct KindArgs {
-    /// Noise, as for `mfm train --noise`: matern[:TAU], matern-normalized:C,
-    /// white, naive, explicit:K[:TAU].
+    /// Noise, as for `mfm train --noise`: matern or matern:TAU,
+    /// matern-normalized:C, white, naive, explicit:K or explicit:K:TAU.
     #[arg(long, conflicts_with_all = ["kind", "tau", "c", "k_noise"])]
     pub noise: Option<NoiseKind>,
     /// Noise kind (the long form of --noise; parameters from --tau, --c, --k-noise).
