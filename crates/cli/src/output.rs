@@ -52,12 +52,10 @@ pub fn write_npy(path: &Path, data: &[f64], shape: &[u64]) -> Result<()> {
     Ok(mfm_files::npy::write(path, data, shape)?)
 }
 
-/// Writes pretty JSON.
+/// Writes pretty JSON ([`mfm_files::write_json`]), creating the folder.
 pub fn write_json(path: &Path, value: &impl serde::Serialize) -> Result<()> {
-    write_atomic(path, |w| {
-        serde_json::to_writer_pretty(&mut *w, value).map_err(std::io::Error::other)?;
-        writeln!(w)
-    })
+    create_parent(path)?;
+    Ok(mfm_files::write_json(path, value)?)
 }
 
 /// Before a command writes anything: refuses outputs that are inputs, lie

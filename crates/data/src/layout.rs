@@ -252,11 +252,7 @@ impl DeformExperiment<'_> {
 /// # Errors
 /// [`DataError::Io`] naming the file.
 pub fn write_space(path: &Path, space: &DeformSpace) -> Result<()> {
-    mfm_files::write_atomic(path, |w| {
-        serde_json::to_writer_pretty(&mut *w, space).map_err(std::io::Error::other)?;
-        std::io::Write::write_all(w, b"\n")
-    })
-    .map_err(|e| match e {
+    mfm_files::write_json(path, space).map_err(|e| match e {
         mfm_files::FileError::Io { source, .. } => DataError::io(path, source),
         other => DataError::format(path, other.to_string()),
     })

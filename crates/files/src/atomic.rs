@@ -181,6 +181,19 @@ pub fn write_atomic(
     file.commit()
 }
 
+/// Writes `value` as pretty-printed JSON with a final newline, through
+/// [`write_atomic`].
+///
+/// # Errors
+/// As [`write_atomic`]; a value serde cannot serialize is a
+/// [`FileError::Io`] naming the file.
+pub fn write_json(path: impl AsRef<Path>, value: &impl serde::Serialize) -> Result<(), FileError> {
+    write_atomic(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, value).map_err(io::Error::other)?;
+        w.write_all(b"\n")
+    })
+}
+
 /// The regular file `path` names after following symbolic links, or the
 /// path to create when nothing exists there.
 ///

@@ -1,7 +1,8 @@
 //! File output for mfm that never loses a user's data, and `.npy` input
 //! that never trusts its header.
 //!
-//! - [`atomic`]: [`AtomicFile`] and [`write_atomic`], the one way mfm writes
+//! - [`atomic`]: [`AtomicFile`] and [`write_atomic`] (and [`write_json`]
+//!   on top of it), the one way mfm writes
 //!   a file: an exclusive temporary file in the target's folder, synced, then
 //!   renamed over the target; removed again on any failure. Existing targets
 //!   that are not regular files (folders, devices, FIFOs, sockets) are
@@ -30,7 +31,7 @@ pub mod space;
 pub mod text;
 pub mod undo;
 
-pub use atomic::{AtomicFile, write_atomic};
+pub use atomic::{AtomicFile, write_atomic, write_json};
 pub use error::FileError;
 pub use guard::Outputs;
 pub use text::fmt_f64;

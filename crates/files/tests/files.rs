@@ -297,3 +297,23 @@ proptest! {
         let _ = npy::from_bytes::<f32>(&bytes[..k]);
     }
 }
+
+#[test]
+fn json_is_pretty_with_a_final_newline_and_refused_like_any_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("summary.json");
+    let value = serde_json::json!({"k": 3, "tau": 1e-300});
+    mfm_files::write_json(&path, &value).unwrap();
+    let text = fs::read_to_string(&path).unwrap();
+    assert_eq!(
+        text,
+        format!("{}\n", serde_json::to_string_pretty(&value).unwrap())
+    );
+    let back: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert_eq!(back, value);
+    // a folder at the path is refused, nothing left behind
+    let folder = dir.path().join("folder");
+    fs::create_dir(&folder).unwrap();
+    assert!(mfm_files::write_json(&folder, &value).is_err());
+    assert!(leftovers(dir.path()).is_empty());
+}
