@@ -7,8 +7,12 @@
 //! ## The energy
 //! With rest positions `p`, deformed positions `x`, the cotangent weight
 //! `w_ij = (cot a_ij + cot b_ij) / 2 = -L_ij` of each edge (`L` the PSD
-//! cotangent Laplacian of [`mfm_geometry::operators::cotangent_laplacian`])
-//! and one rotation `R_i` per vertex,
+//! cotangent Laplacian of [`mfm_geometry::operators::cotangent_laplacian`];
+//! a negative weight, from two opposite angles summing to more than 180
+//! degrees, is set to 0 and `L`'s diagonal re-summed, since with negative
+//! weights the energy below is unbounded and the iteration diverges; a mesh
+//! without negative weights uses `L` unchanged) and one rotation `R_i` per
+//! vertex,
 //!
 //! ```text
 //! E(x, R) = sum_i sum_{j in N(i)} w_ij |(x_i - x_j) - R_i (p_i - p_j)|^2
@@ -271,15 +275,35 @@ impl Arap {
     /// handle, an unreferenced vertex); [`DeformError::Solver`] if the
     /// factorization fails anyway (e.g. a badly degenerate mesh).
     pub fn new(rest: &TriMesh, handles: &HandleSet) -> Result<Self> {
-        let n = rest.num_vertices();
         let regions = handles.regions(rest)?;
+        Self::with_regions(rest, handles, regions)
+    }
+
+    /// [`Arap::new`] with the handles' vertex regions given instead of
+    /// selected by the balls on `rest`. This is how a changed body shape of
+    /// a template is posed: the regions are chosen once on the template and
+    /// keep their vertices when the shape moves them (see
+    /// [`crate::shape`]); `handles` supplies the centres the rigid motions
+    /// turn about.
+    ///
+    /// # Errors
+    /// [`DeformError::SizeMismatch`] unless there is one region per handle;
+    /// [`DeformError::InvalidParameter`] for an empty region, a vertex
+    /// outside the mesh or in two regions; otherwise as [`Arap::new`].
+    pub fn with_regions(
+        rest: &TriMesh,
+        handles: &HandleSet,
+        regions: Vec<Vec<usize>>,
+    ) -> Result<Self> {
+        let n = rest.num_vertices();
+        check_regions(n, handles, &regions)?;
         let mut handle_of = vec![FREE; n];
         for (h, region) in regions.iter().enumerate() {
             for &v in region {
                 handle_of[v] = h as u32;
             }
         }
-        let l = operators::cotangent_laplacian(rest);
+        let l = nonnegative_weights(operators::cotangent_laplacian(rest))?;
         let mass = operators::lumped_mass(rest);
 
         // one-rings from the columns of L (both triangles are stored)
@@ -861,6 +885,81 @@ fn greedy_coloring(n: usize, ring_ptr: &[usize], ring: &[u32]) -> Vec<Vec<u32>> 
 
 /// Every free vertex must reach a constrained one through edges with a
 /// non-zero weight, or `L_FF` is singular.
+
+/// The cotangent Laplacian with every negative edge weight set to 0 (its
+/// diagonal re-summed), or `l` itself, untouched, when no weight is
+/// negative. With a negative weight (an edge opposite two angles summing
+/// to more than 180 degrees, common where a refinement meets coarse faces)
+/// the ARAP energy is unbounded below: the local step's "best rotation"
+/// rewards stretching that edge and the iteration runs away.
+fn nonnegative_weights(l: SparseColMat<usize, f64>) -> Result<SparseColMat<usize, f64>> {
+    let n = l.ncols();
+    let (cp, ri, val) = (l.symbolic().col_ptr(), l.symbolic().row_idx(), l.val());
+    let negative = (0..n).any(|c| (cp[c]..cp[c + 1]).any(|k| ri[k] != c && val[k] > 0.0));
+    if !negative {
+        return Ok(l);
+    }
+    let mut triplets = Vec::with_capacity(val.len());
+    for c in 0..n {
+        let mut diagonal = 0.0;
+        for k in cp[c]..cp[c + 1] {
+            let r = ri[k];
+            if r != c {
+                let v = val[k].min(0.0);
+                diagonal -= v;
+                triplets.push(Triplet::new(r, c, v));
+            }
+        }
+        triplets.push(Triplet::new(c, c, diagonal));
+    }
+    SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets).map_err(|e| {
+        DeformError::InvalidParameter {
+            name: "cotangent Laplacian with clamped weights",
+            expected: "a sparse matrix faer can assemble",
+            found: format!("{e:?}"),
+        }
+    })
+}
+
+/// One region per handle, each non-empty, inside the mesh and disjoint.
+fn check_regions(n: usize, handles: &HandleSet, regions: &[Vec<usize>]) -> Result<()> {
+    if regions.len() != handles.len() {
+        return Err(DeformError::SizeMismatch {
+            what: "handle regions",
+            expected: handles.len(),
+            found: regions.len(),
+        });
+    }
+    let mut owner = vec![usize::MAX; n];
+    for (h, region) in regions.iter().enumerate() {
+        let bad = |found: String| DeformError::InvalidParameter {
+            name: "handle regions",
+            expected: "non-empty, disjoint sets of vertices of the mesh",
+            found,
+        };
+        if region.is_empty() {
+            return Err(bad(format!("{} is empty", handles.name(h))));
+        }
+        for &v in region {
+            if v >= n {
+                return Err(bad(format!(
+                    "{} holds vertex {v} of a mesh with {n} vertices",
+                    handles.name(h)
+                )));
+            }
+            if owner[v] != usize::MAX {
+                return Err(bad(format!(
+                    "vertex {v} is in {} and {}",
+                    handles.name(owner[v]),
+                    handles.name(h)
+                )));
+            }
+            owner[v] = h;
+        }
+    }
+    Ok(())
+}
+
 fn check_connected(
     n: usize,
     handle_of: &[u32],

@@ -128,6 +128,17 @@ pub enum DeformError {
         source: SolverError,
     },
 
+    /// A body-shape change ([`crate::shape`]) turned a face over: the
+    /// parameters are too large for this mesh.
+    #[error(
+        "the shape change turns face {face} over (its normal turned by more than 90 degrees): \
+         use smaller scale ranges"
+    )]
+    FoldedShape {
+        /// The first folded face.
+        face: usize,
+    },
+
     /// Geodesic (edge-path) distances for handle placement failed.
     #[error("handle placement: {0}")]
     Geometry(#[from] HoleError),

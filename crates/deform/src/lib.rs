@@ -19,6 +19,10 @@
 //!   agree to a few percent of the displacement.
 //! - [`space`]: [`DeformSpace`] (`sample_params(seed, index)`,
 //!   [`DeformSpace::generate`]) and [`Shape`].
+//! - [`shape`]: [`ShapeFamily`] (smooth region-wise anisotropic scalings
+//!   of a template, a stand-in for a body-shape space), [`ShapeParams`],
+//!   and the posing of a member with the template's handles
+//!   ([`ShapeFamily::pose_space`], [`Arap::with_regions`]).
 //! - [`align`]: [`normalize_rest`], [`align_to_rest`] (centroid + rotation
 //!   about the up axis, Procrustes to the rest), [`align_rigid`].
 //! - [`projection`]: [`project`] and [`Projection`] (mass-weighted MSE).
@@ -61,6 +65,7 @@ pub mod error;
 pub mod handles;
 pub mod projection;
 pub mod rigid;
+pub mod shape;
 pub mod space;
 
 pub use align::{align_rigid, align_to_rest, normalize_rest};
@@ -68,4 +73,5 @@ pub use arap::{Arap, ArapOptions, Deformation};
 pub use error::{DeformError, Result};
 pub use handles::{DEFAULT_RADIUS_FRACTION, DeformParams, Handle, HandleSet, RigidParams};
 pub use projection::{Projection, project};
+pub use shape::{ShapeFamily, ShapeParams, ShapeRegion};
 pub use space::{DEFAULT_MAX_ANGLE, DEFAULT_MAX_SHIFT, DeformSpace, Shape};

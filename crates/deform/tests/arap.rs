@@ -6,7 +6,9 @@ mod common;
 
 use common::{max_diff, space_on, unit_blob};
 use mfm_deform::rigid::{axis_angle_to_matrix, mat_vec};
-use mfm_deform::{Arap, ArapOptions, DeformError, DeformParams, Handle, HandleSet, RigidParams};
+use mfm_deform::{
+    Arap, ArapOptions, DeformError, DeformParams, Handle, HandleSet, RigidParams, normalize_rest,
+};
 use mfm_geometry::{Topology, TriMesh, procedural};
 use mfm_processing::holes::{HoleMetric, punch_holes};
 use proptest::prelude::*;
@@ -32,6 +34,51 @@ fn identity_params_return_the_rest_shape() {
             .abs()
             < 1e-28
     );
+}
+
+/// A mesh refined on one half has edges whose cotangent weight is negative
+/// (two opposite angles over 180 degrees where fine faces meet coarse ones).
+/// With those weights the ARAP energy is unbounded below; the solver clamps
+/// them, so the identity is still exact and every pose's energy stays
+/// non-negative and non-increasing.
+#[test]
+fn negative_cotangent_weights_do_not_make_the_iteration_diverge() {
+    use mfm_processing::refine::{RefineCriterion, refine_region};
+    let coarse = normalize_rest(&procedural::capsule(0.5, 0.75, 8, 24).unwrap())
+        .unwrap()
+        .0;
+    let mesh = refine_region(
+        &coarse,
+        |p| p[0] < 0.0,
+        RefineCriterion::MaxEdgeLength(0.02),
+    )
+    .unwrap();
+    let l = mfm_geometry::operators::cotangent_laplacian(&mesh);
+    let (cp, ri) = (l.symbolic().col_ptr(), l.symbolic().row_idx());
+    let negative = (0..mesh.num_vertices())
+        .flat_map(|c| (cp[c]..cp[c + 1]).map(move |k| (c, k)))
+        .filter(|&(c, k)| ri[k] != c && l.val()[k] > 0.0)
+        .count();
+    assert!(negative > 0, "the test mesh needs negative weights");
+    let space = space_on(&mesh);
+    let arap = Arap::new(&mesh, &space.handles).unwrap();
+    let opts = ArapOptions::default();
+    let rest = arap.deform(&DeformParams::identity(3), &opts).unwrap();
+    assert!(max_diff(&rest.positions, mesh.positions()) < 1e-10);
+    assert!(arap.energy(mesh.positions(), &opts).unwrap().abs() < 1e-20);
+    for i in 0..3 {
+        let out = arap.deform(&space.sample_params(1, i), &opts).unwrap();
+        assert!(out.energies.iter().all(|&e| e >= 0.0), "{:?}", out.energies);
+        assert!(
+            out.energies
+                .windows(2)
+                .all(|w| w[1] <= w[0] * (1.0 + 1e-12)),
+            "{:?}",
+            out.energies
+        );
+        // the pose stays near the rest shape: nothing ran away
+        assert!(max_diff(&out.positions, mesh.positions()) < 0.5);
+    }
 }
 
 #[test]
