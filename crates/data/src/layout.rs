@@ -1,15 +1,16 @@
-//! The folder layout of an experiment: what `mfm dataset gmm` and
-//! `mfm dataset deform` write, and where `mfm train`, `mfm eval` and the
+//! The folder layout of an experiment: what `mfm dataset gmm`,
+//! `mfm dataset deform` and `mfm dataset pairs` write, and where `mfm train`, `mfm eval` and the
 //! xtask experiments find it.
 //!
 //! | entry | written by | what |
 //! |---|---|---|
 //! | [`TRAIN`] | both | the training set, a dataset folder on the training mesh |
 //! | [`REFERENCE`] | both, when held-out signals are asked for | held-out signals on the evaluation mesh (another triangulation of the same surface) |
-//! | [`HOLDOUT`] | deform | the same held-out parameters on the training mesh |
+//! | [`HOLDOUT`] | deform, pairs | the same held-out parameters on the training mesh |
 //! | [`TEST_MESH`] | gmm, without a reference set | the test mesh alone |
-//! | `original.ply`, `coarse.ply`, `eval.ply` | deform | the normalized input, training and evaluation meshes ([`DEFORM_MESHES`]) |
+//! | `original.ply`, `coarse.ply`, `eval.ply` | deform, pairs | the normalized input, training and evaluation meshes ([`DEFORM_MESHES`]) |
 //! | [`SPACE`] | deform | the deformation space ([`read_space`]) |
+//! | [`PAIR_SPACE`] | pairs | the shape and pose space of a pairs experiment ([`read_pair_space`]) |
 //! | [`PREVIEW`] | both (by the caller) | a picture of the first training signals |
 //!
 //! Held-out sets draw from [`held_out_seed`]`(seed)`, a different stream
@@ -52,6 +53,7 @@ use crate::dataset::{Dataset, Manifest};
 use crate::deformations::{self, DeformMeshes};
 use crate::error::{DataError, Result};
 use crate::gmm::{GenerateOptions, GmmConfig, GmmGenerator};
+use crate::pairs::{self, PairSpace};
 
 /// The training set's folder.
 pub const TRAIN: &str = "train";
@@ -271,4 +273,130 @@ pub fn read_space(path: &Path) -> Result<DeformSpace> {
             format!("not a deformation space (space.json of mfm dataset deform): {e}"),
         )
     })
+}
+
+/// The pair space of a pairs experiment ([`PairsExperiment`]).
+pub const PAIR_SPACE: &str = "pair_space.json";
+
+/// A pairs experiment (`mfm dataset pairs`): posed shapes of a template for
+/// the arbitrary-source model ([`crate::pairs`]).
+///
+/// [`TRAIN`] holds shapes `0..train` of `seed` on the coarse mesh;
+/// [`HOLDOUT`] holds shapes `0..reference` of [`held_out_seed`]`(seed)` on
+/// the coarse mesh (unseen body shapes, the training connectivity) and
+/// [`REFERENCE`] the same held-out shapes on the evaluation mesh (unseen
+/// shapes on another triangulation). The meshes are those of a deformation
+/// experiment ([`DeformMeshes`]).
+#[derive(Clone, Copy, Debug)]
+pub struct PairsExperiment<'a> {
+    /// The normalized, coarse and evaluation meshes.
+    pub meshes: &'a DeformMeshes,
+    /// The shape family and pose space (on `meshes.original`).
+    pub space: &'a PairSpace,
+    /// Where the mesh came from, for the manifests.
+    pub source: &'a str,
+    /// Number of training shapes (at least 1).
+    pub train: usize,
+    /// Number of held-out shapes (0 writes no held-out sets).
+    pub reference: usize,
+    /// The training seed.
+    pub seed: u64,
+    /// Whether to show progress bars.
+    pub progress: bool,
+}
+
+impl PairsExperiment<'_> {
+    /// What [`Self::write`] creates in its folder (and the caller's
+    /// [`PREVIEW`]), for cleaning up after a failure.
+    pub const ENTRIES: [&'static str; 8] = [
+        TRAIN,
+        REFERENCE,
+        HOLDOUT,
+        DEFORM_MESHES[0],
+        DEFORM_MESHES[1],
+        DEFORM_MESHES[2],
+        PAIR_SPACE,
+        PREVIEW,
+    ];
+
+    /// Writes the meshes, the space and the datasets into `out` (which must
+    /// exist); returns the training set.
+    ///
+    /// Cost: per shape and mesh, one ARAP factorization and one solve per
+    /// pose.
+    ///
+    /// # Errors
+    /// [`DataError::Config`] for no training shapes; the shape, pose and
+    /// writing errors.
+    pub fn write(&self, out: &Path) -> Result<Dataset> {
+        let m = self.meshes;
+        for (file, mesh) in DEFORM_MESHES.iter().zip([&m.original, &m.coarse, &m.eval]) {
+            mfm_meshio::write_ply(out.join(file), mesh, &[])?;
+        }
+        let path = out.join(PAIR_SPACE);
+        mfm_files::write_json(&path, self.space).map_err(|e| match e {
+            mfm_files::FileError::Io { source, .. } => DataError::io(&path, source),
+            other => DataError::format(&path, other.to_string()),
+        })?;
+        let set =
+            |dir: &str, mesh: &TriMesh, seed: u64, range: Range<usize>, role: &str, what: &str| {
+                pairs::write_dataset(
+                    &out.join(dir),
+                    mesh,
+                    self.space,
+                    seed,
+                    range,
+                    m.normalization,
+                    m.frame,
+                    role,
+                    &format!("mfm dataset pairs: {what} of {}", self.source),
+                    self.progress,
+                )
+            };
+        let train = set(
+            TRAIN,
+            &m.coarse,
+            self.seed,
+            0..self.train,
+            "coarse",
+            "training shapes on the coarse mesh",
+        )?;
+        if self.reference > 0 {
+            let held_out = held_out_seed(self.seed);
+            set(
+                HOLDOUT,
+                &m.coarse,
+                held_out,
+                0..self.reference,
+                "coarse",
+                "held-out shapes on the coarse mesh",
+            )?;
+            set(
+                REFERENCE,
+                &m.eval,
+                held_out,
+                0..self.reference,
+                "eval",
+                "held-out shapes on the evaluation mesh",
+            )?;
+        }
+        Ok(train)
+    }
+}
+
+/// Reads the pair space of a pairs experiment ([`PAIR_SPACE`]).
+///
+/// # Errors
+/// [`DataError::Io`] if it cannot be read, [`DataError::Format`] if it is
+/// not a pair space.
+pub fn read_pair_space(path: &Path) -> Result<PairSpace> {
+    let text = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
+    let space: PairSpace = serde_json::from_str(&text).map_err(|e| {
+        DataError::format(
+            path,
+            format!("not a pair space ({PAIR_SPACE} of mfm dataset pairs): {e}"),
+        )
+    })?;
+    space.validate()?;
+    Ok(space)
 }

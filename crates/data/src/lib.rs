@@ -6,17 +6,21 @@
 //! layout, the
 //! distribution metrics (MMD, COV, 1-NNA, test error) and the
 //! sample-quality measures that a flat, noisy or collapsed sample set cannot
-//! pass. `mfm-fm` trains and samples on top of it; `mfm` built without its
+//! pass, and the arbitrary-source model's data: (source, target) shape
+//! pairs of a template ([`pairs`]) and the template's eigenvectors with
+//! fixed signs ([`eigenbasis`]). `mfm-fm` trains and samples on top of it; `mfm` built without its
 //! network feature uses this crate alone.
 
 pub mod dataset;
 pub mod deformations;
+pub mod eigenbasis;
 pub mod error;
 pub mod evaluation;
 pub mod experiment;
 pub mod gmm;
 pub mod layout;
 pub mod metrics;
+pub mod pairs;
 pub mod quality;
 pub mod signals;
 
