@@ -1,5 +1,5 @@
-//! `mfm dataset gmm` and `mfm dataset deform`: training and reference sets
-//! written as dataset folders.
+//! `mfm dataset gmm`, `mfm dataset deform` and `mfm dataset pairs`:
+//! training and reference sets written as dataset folders.
 
 use crate::mesh_arg::load_mesh_checked;
 use crate::output::ensure_empty;
@@ -10,7 +10,9 @@ use mfm_data::SignalSource;
 use mfm_data::deformations::{self, DeformMeshes};
 use mfm_data::experiment::GmmMeshes;
 use mfm_data::gmm::{GenerateOptions, GmmConfig, GmmDistance};
-use mfm_data::layout::{self, DeformExperiment, GmmExperiment};
+use mfm_data::layout::{self, DeformExperiment, GmmExperiment, PairsExperiment};
+use mfm_data::pairs::PairSpace;
+use mfm_deform::ShapeFamily;
 use mfm_geometry::TriMesh;
 use mfm_render::{ColorRange, Panel};
 use std::path::{Path, PathBuf};
@@ -37,7 +39,71 @@ pub enum DatasetCommand {
     /// and OUT/preview.png. Each dataset folder has params.json with every
     /// sample's handle parameters.
     Deform(DeformArgs),
+    /// Posed body shapes of a template, for the arbitrary-source model:
+    /// each shape is a smooth region-wise anisotropic scaling of the
+    /// normalized, decimated mesh (the stand-in for a body-shape space),
+    /// shown in several ARAP poses of the automatic handles; a training
+    /// pair is two poses of one shape. Writes OUT/train (shapes on the
+    /// coarse mesh, POSES meshes per shape), OUT/holdout (unseen shapes on
+    /// the coarse mesh), OUT/reference (the same unseen shapes on the finer
+    /// evaluation triangulation), OUT/{original,coarse,eval}.ply,
+    /// OUT/pair_space.json and OUT/preview.png; each dataset folder has
+    /// params.json with every shape's and pose's parameters.
+    Pairs(PairsArgs),
 }
+
+/// Arguments of `mfm dataset pairs`.
+#[derive(Args)]
+pub struct PairsArgs {
+    /// The template mesh (a file or builtin:NAME); default
+    /// ../shared/meshes/alien.obj when it exists.
+    #[arg(long)]
+    mesh: Option<String>,
+    /// Output folder (must not exist or be empty).
+    #[arg(long)]
+    out: PathBuf,
+    /// Training shapes.
+    #[arg(long, default_value_t = 40)]
+    shapes: usize,
+    /// Poses per shape (at least 2; each shape gives POSES x (POSES - 1)
+    /// ordered pairs).
+    #[arg(long, default_value_t = 4)]
+    poses: usize,
+    /// Held-out shapes (on the coarse mesh and on the evaluation mesh).
+    #[arg(long, default_value_t = 8)]
+    reference: usize,
+    /// Shape regions scaled independently (one at the centroid, the others
+    /// at extremities).
+    #[arg(long, default_value_t = 6)]
+    regions: usize,
+    /// Largest log-scale of a region along an axis.
+    #[arg(long, default_value_t = mfm_deform::shape::DEFAULT_MAX_REGION)]
+    max_region_scale: f64,
+    /// Largest log-scale of the whole shape along an axis.
+    #[arg(long, default_value_t = mfm_deform::shape::DEFAULT_MAX_GLOBAL)]
+    max_global_scale: f64,
+    /// Moving pose handles (the anchor comes on top).
+    #[arg(long, default_value_t = 5)]
+    handles: usize,
+    /// Pose handle radius as a fraction of the bounding-box diagonal.
+    #[arg(long, default_value_t = 0.08)]
+    radius: f64,
+    /// Largest handle rotation, in radians.
+    #[arg(long, default_value_t = 0.5)]
+    max_angle: f64,
+    /// Largest handle translation, as a fraction of the bounding-box diagonal.
+    #[arg(long, default_value_t = 0.12)]
+    max_shift: f64,
+    /// Faces of the coarse training mesh.
+    #[arg(long, default_value_t = 3000)]
+    coarse_faces: usize,
+    /// Seed (held-out shapes use their own stream of the same seed).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+/// The template `mfm dataset pairs` uses without `--mesh`.
+const DEFAULT_PAIRS_MESH: &str = "../shared/meshes/alien.obj";
 
 /// Arguments of `mfm dataset deform`.
 #[derive(Args)]
@@ -119,7 +185,100 @@ pub fn dataset(cmd: DatasetCommand) -> Result<()> {
     match cmd {
         DatasetCommand::Gmm(a) => dataset_gmm(a),
         DatasetCommand::Deform(a) => dataset_deform(a),
+        DatasetCommand::Pairs(a) => dataset_pairs(a),
     }
+}
+
+/// Runs `mfm dataset pairs`.
+fn dataset_pairs(a: PairsArgs) -> Result<()> {
+    if a.shapes == 0 {
+        bail!("--shapes must be at least 1");
+    }
+    if a.poses < 2 {
+        bail!("--poses must be at least 2 (a pair is two poses of one shape)");
+    }
+    let spec = match &a.mesh {
+        Some(m) => m.clone(),
+        None if Path::new(DEFAULT_PAIRS_MESH).is_file() => DEFAULT_PAIRS_MESH.to_owned(),
+        None => bail!(
+            "no --mesh given and the default template {DEFAULT_PAIRS_MESH} is not here; \
+             pass --mesh FILE or --mesh builtin:NAME"
+        ),
+    };
+    ensure_empty(&a.out)?;
+    let t0 = std::time::Instant::now();
+    let input = load_mesh_checked(&spec)?;
+    let undo = dataset_undo(&a.out, &PairsExperiment::ENTRIES)?;
+    let meshes = DeformMeshes::from_mesh(&input, a.coarse_faces)
+        .with_context(|| format!("preparing the meshes of {spec}"))?;
+    let poses = deformations::space_for(
+        &meshes.original,
+        a.handles,
+        a.radius,
+        a.max_angle,
+        a.max_shift,
+    )
+    .with_context(|| format!("placing {} pose handles on {spec}", a.handles))?;
+    let mut family = ShapeFamily::auto(&meshes.original, a.regions)
+        .with_context(|| format!("placing {} shape regions on {spec}", a.regions))?;
+    family.max_region = a.max_region_scale;
+    family.max_global = a.max_global_scale;
+    let space = PairSpace {
+        family,
+        poses,
+        poses_per_shape: a.poses,
+    };
+    space.validate()?;
+    for (role, m) in [("coarse", &meshes.coarse), ("eval", &meshes.eval)] {
+        println!(
+            "{role:>8} mesh: {:>6} vertices, {:>6} faces",
+            m.num_vertices(),
+            m.num_faces()
+        );
+    }
+    let train = PairsExperiment {
+        meshes: &meshes,
+        space: &space,
+        source: &spec,
+        train: a.shapes,
+        reference: a.reference,
+        seed: a.seed,
+        progress: true,
+    }
+    .write(&a.out)?;
+    let preview = train.load_all()?;
+    // the poses of the first two shapes, a row each
+    let shown: Vec<(usize, TriMesh)> = (0..preview.len().min(2 * a.poses))
+        .map(|i| Ok((i, meshes.coarse.with_positions(preview.positions(i))?)))
+        .collect::<Result<_>>()?;
+    let panels: Vec<Panel<'_>> = shown
+        .iter()
+        .map(|(i, m)| {
+            Panel::new(
+                m,
+                None,
+                format!("shape {} pose {}", i / a.poses, i % a.poses),
+            )
+        })
+        .collect();
+    save_grid(
+        &panels,
+        a.poses,
+        "pairs: poses (columns) of body shapes (rows)",
+        ColorRange::Auto,
+        &a.out.join(layout::PREVIEW),
+    )?;
+    undo.keep();
+    println!(
+        "wrote {} ({} training shapes x {} poses = {} pairs, {} held-out shapes) in {:.1} s",
+        a.out.display(),
+        a.shapes,
+        a.poses,
+        a.shapes * a.poses * (a.poses - 1),
+        a.reference,
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
 }
 
 /// Runs `mfm dataset deform`.
