@@ -349,6 +349,24 @@ pub fn remove_stale_temporaries(run_dir: &Path) -> Result<()> {
 /// [`FmError::Io`] for a missing or unreadable file, [`FmError::Format`]
 /// naming the file that is truncated, corrupted, or unparsable.
 pub fn verify_checkpoint(dir: &Path) -> Result<CheckpointState> {
+    verify_checkpoint_listing(
+        dir,
+        &[
+            WEIGHTS_FILE,
+            NET_CONFIG_FILE,
+            OPTIMIZER_FILE,
+            CONFIG_FILE,
+            FLOW_FILE,
+        ],
+    )
+}
+
+/// [`verify_checkpoint`] for a checkpoint that must list the files
+/// `required` (another kind of run than the trainer's).
+///
+/// # Errors
+/// As [`verify_checkpoint`].
+pub fn verify_checkpoint_listing(dir: &Path, required: &[&str]) -> Result<CheckpointState> {
     let state_path = dir.join(STATE_FILE);
     let text = std::fs::read_to_string(&state_path).map_err(|e| FmError::io(&state_path, e))?;
     let state: CheckpointState = serde_json::from_str(&text).map_err(|e| {
@@ -366,13 +384,7 @@ pub fn verify_checkpoint(dir: &Path) -> Result<CheckpointState> {
             ),
         ));
     }
-    for required in [
-        WEIGHTS_FILE,
-        NET_CONFIG_FILE,
-        OPTIMIZER_FILE,
-        CONFIG_FILE,
-        FLOW_FILE,
-    ] {
+    for &required in required {
         if !state.files.contains_key(required) {
             return Err(FmError::format(
                 &state_path,
@@ -550,9 +562,21 @@ pub type NewestValid = (
 /// # Errors
 /// [`FmError::Io`] if the checkpoint folder cannot be listed.
 pub fn newest_valid_checkpoint(run_dir: &Path) -> Result<NewestValid> {
+    newest_valid_with(run_dir, verify_checkpoint)
+}
+
+/// [`newest_valid_checkpoint`] with another check of each checkpoint
+/// (e.g. [`verify_checkpoint_listing`] with other required files).
+///
+/// # Errors
+/// As [`newest_valid_checkpoint`].
+pub fn newest_valid_with(
+    run_dir: &Path,
+    verify: impl Fn(&Path) -> Result<CheckpointState>,
+) -> Result<NewestValid> {
     let mut rejected = Vec::new();
     for c in list_checkpoints(run_dir)?.into_iter().rev() {
-        match verify_checkpoint(&c.dir) {
+        match verify(&c.dir) {
             Ok(state) if state.step == c.step => return Ok((Some((c, state)), rejected)),
             Ok(state) => {
                 let msg = format!(

@@ -16,7 +16,7 @@ use mfm_geometry::TriMesh;
 use mfm_geometry::operators::Operators;
 use mfm_net::MeshTensors;
 use mfm_noise::{NoiseKind, NoiseSampler};
-use mfm_solver::{LaplacianSolver, ShiftOptions};
+use mfm_solver::{LaplacianSolver, ShiftOptions, SymbolicAnalysis};
 
 use crate::error::Result;
 
@@ -39,14 +39,33 @@ impl MeshContext {
     /// # Errors
     /// An invalid noise kind, a degenerate face, a factorization failure.
     pub fn new(mesh: &TriMesh, noise: NoiseKind) -> Result<Self> {
+        Self::sharing(mesh, noise, None)
+    }
+
+    /// [`MeshContext::new`] with every factorization on `symbolic`, a
+    /// symbolic analysis of the Laplacian's pattern shared by many shapes of
+    /// one connectivity (the arbitrary-source model's sources): only
+    /// numeric factorizations run, with the bits of fresh analyses. `None`
+    /// is [`MeshContext::new`].
+    ///
+    /// # Errors
+    /// As [`MeshContext::new`], plus a pattern mismatch for an analysis of
+    /// another connectivity.
+    pub fn sharing(
+        mesh: &TriMesh,
+        noise: NoiseKind,
+        symbolic: Option<&Arc<SymbolicAnalysis>>,
+    ) -> Result<Self> {
         noise.validate()?;
         let ops = Operators::new(mesh)?;
-        let sampler = NoiseSampler::from_operators(&ops.laplacian, &ops.mass, noise)?;
+        let sampler =
+            NoiseSampler::from_operators_sharing(&ops.laplacian, &ops.mass, noise, symbolic)?;
         // L + eps I has the pattern of the noise's L + tau M: one symbolic
         // analysis serves both factorizations
         let shift = ShiftOptions::default();
-        let solver = match sampler.screened_poisson() {
-            Some(p) => LaplacianSolver::with_symbolic(p.symbolic(), &ops.laplacian, &shift)?,
+        let shared = symbolic.or(sampler.screened_poisson().map(|p| p.symbolic()));
+        let solver = match shared {
+            Some(s) => LaplacianSolver::with_symbolic(s, &ops.laplacian, &shift)?,
             None => LaplacianSolver::with_options(&ops.laplacian, &shift)?,
         };
         let tensors = MeshTensors::from_operators(mesh.faces(), &ops, Arc::new(solver))?;

@@ -7,6 +7,7 @@
 //! [`mfm_data`] crate and are re-exported here under their old paths.
 
 pub mod adam;
+pub mod arbitrary;
 pub mod checkpoint;
 pub mod config;
 pub mod context;

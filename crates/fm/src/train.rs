@@ -121,7 +121,7 @@ fn splitmix64(x: &mut u64) -> u64 {
 
 /// The generator of stream `stream` of the key derived from `(seed,
 /// purpose)`: a pure function of its arguments.
-fn derived_rng(seed: u64, purpose: u64, stream: u64) -> ChaCha8Rng {
+pub(crate) fn derived_rng(seed: u64, purpose: u64, stream: u64) -> ChaCha8Rng {
     let mut state = seed ^ purpose.wrapping_mul(0xD6E8_FEB8_6659_FD93);
     let mut key = [0u8; 32];
     for chunk in key.chunks_mut(8) {
@@ -462,7 +462,7 @@ fn with_resumable_edits(run_dir: &Path, saved: RunConfig, step: u64) -> Result<R
 
 /// Rewrites the log keeping the header and the rows with `step <= keep`
 /// (creates it with only the header when missing).
-fn truncate_log(path: &Path, keep: u64) -> Result<()> {
+pub(crate) fn truncate_log(path: &Path, keep: u64) -> Result<()> {
     let text = match std::fs::read_to_string(path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),

@@ -62,8 +62,11 @@ use faer::sparse::SparseColMat;
 use mfm_files::fmt_f64;
 use mfm_geometry::TriMesh;
 use mfm_geometry::operators::{Operators, try_gamma};
-use mfm_solver::{EigenOptions, Eigenpairs, ScreenedPoisson, generalized_eigenpairs};
+use mfm_solver::{
+    EigenOptions, Eigenpairs, ScreenedPoisson, SymbolicAnalysis, generalized_eigenpairs,
+};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 use crate::error::{NoiseError, Result};
 use crate::kind::NoiseKind;
@@ -421,6 +424,32 @@ impl NoiseSampler {
         mass: &[f64],
         kind: NoiseKind,
     ) -> Result<Self> {
+        Self::from_operators_sharing(l, mass, kind, None)
+    }
+
+    /// [`NoiseSampler::from_operators`] whose factor of `L + tau M` (for the
+    /// Matérn kinds) reuses `symbolic`, a symbolic analysis of `L`'s pattern
+    /// ([`ScreenedPoisson::analyse`], or [`ScreenedPoisson::symbolic`] of a
+    /// sampler on another shape of the same connectivity): only the numeric
+    /// factorization runs, with the same bits as a fresh analysis. `None`
+    /// analyses the pattern itself. Kinds without a factor ignore it.
+    ///
+    /// # Errors
+    /// As [`NoiseSampler::from_operators`], plus
+    /// [`mfm_solver::SolverError::PatternMismatch`] (inside
+    /// [`NoiseError::Solver`]) for an analysis of another pattern.
+    pub fn from_operators_sharing(
+        l: &SparseColMat<usize, f64>,
+        mass: &[f64],
+        kind: NoiseKind,
+        symbolic: Option<&Arc<SymbolicAnalysis>>,
+    ) -> Result<Self> {
+        let screened = |tau: f64| -> Result<ScreenedPoisson> {
+            Ok(match symbolic {
+                Some(s) => ScreenedPoisson::with_symbolic(s, l, mass, tau)?,
+                None => ScreenedPoisson::new(l, mass, tau)?,
+            })
+        };
         kind.validate()?;
         if l.nrows() == l.ncols() && mass.len() != l.nrows() {
             return Err(NoiseError::SizeMismatch {
@@ -458,7 +487,7 @@ impl NoiseSampler {
                     Some(0.0),
                     1.0,
                     Engine::Poisson {
-                        poisson: ScreenedPoisson::new(l, mass, eps)?,
+                        poisson: screened(eps)?,
                         sqrt_mass: sqrt_mass(),
                         null_space: Some(Components::new(l, mass)),
                     },
@@ -481,7 +510,7 @@ impl NoiseSampler {
                 Some(tau),
                 1.0,
                 Engine::Poisson {
-                    poisson: ScreenedPoisson::new(l, mass, tau)?,
+                    poisson: screened(tau)?,
                     sqrt_mass: sqrt_mass(),
                     null_space: None,
                 },
@@ -499,7 +528,7 @@ impl NoiseSampler {
                     Some(tau),
                     gamma.sqrt(),
                     Engine::Poisson {
-                        poisson: ScreenedPoisson::new(l, mass, tau)?,
+                        poisson: screened(tau)?,
                         sqrt_mass: sqrt_mass(),
                         null_space: None,
                     },

@@ -1,0 +1,430 @@
+//! The arbitrary-source flow: target positions generated as a signal over
+//! the source mesh, with the source's own operators, noise and Poisson
+//! solves, every block conditioned on `[source xyz, t, predicted
+//! eigenvectors]` (`3 + 1 + k` channels).
+//!
+//! Training pairs come from a pairs dataset ([`mfm_data::pairs`]). Per
+//! pair: both shapes go into the source's frame (and augmentation); the
+//! target `x1` and the noise `x0 = sigma * (Matérn noise on the source)`
+//! lose their mass-weighted means (the source's masses); `x_t = (1 - t) x0
+//! + t x1`; the loss is the flow-matching loss against `x1 - x0` (vertex
+//! and Jacobian terms). Sampling integrates the velocity from noise on the
+//! source with the midpoint rule, adds the source's mass-weighted centroid
+//! and maps back to the source's units.
+//!
+//! Run folder: [`ARBITRARY_SPEC`], a copy of the predictor
+//! ([`PREDICTOR_WEIGHTS`], its `.json`, [`PREDICTOR_COPY_SPEC`]), the log,
+//! checkpoints and, when finished, `model.safetensors` + `model.json`.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use mfm_data::SignalSource;
+use mfm_data::dataset::Dataset;
+use mfm_data::pairs::PairsManifest;
+use mfm_geometry::TriMesh;
+use mfm_net::{HeadKind, PoissonNet, PoissonNetConfig, loss};
+use mfm_noise::NoiseKind;
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+use tch::{Device, Kind, Tensor};
+
+use super::predictor::{EigenPredictor, PredictorSpec, positions_tensor, prepared};
+use super::run::{Optimization, TrainReport};
+use super::sources::SourceSet;
+use super::{Schedule, to_own_frame};
+use crate::checkpoint::{NET_CONFIG_FILE, WEIGHTS_FILE};
+use crate::context::MeshContext;
+use crate::error::{FmError, Result};
+use crate::train::derived_rng;
+
+/// The flow run's description.
+pub const ARBITRARY_SPEC: &str = "arbitrary.json";
+/// The frozen predictor's weights, copied into the flow run.
+pub const PREDICTOR_WEIGHTS: &str = "predictor.safetensors";
+/// The copied predictor's description.
+pub const PREDICTOR_COPY_SPEC: &str = "predictor.spec.json";
+
+const PURPOSE_ITEMS: u64 = 21;
+
+/// The flow's network, noise and training settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FlowConfig {
+    /// Network width.
+    pub width: usize,
+    /// Poisson blocks.
+    pub blocks: usize,
+    /// The noise of the source distribution (on each source).
+    #[serde(with = "crate::config::noise_kind_string")]
+    pub noise: NoiseKind,
+    /// The noise amplitude `sigma`.
+    pub sigma: f64,
+    /// Midpoint steps of the sampler.
+    pub ode_steps: usize,
+    /// Optimization.
+    pub schedule: Schedule,
+}
+
+/// Preset names of [`FlowConfig::preset`].
+pub const PRESETS: [&str; 2] = ["paper", "cpu"];
+
+impl FlowConfig {
+    /// The official configuration (`moyo_arbitrary_source.yaml`): width
+    /// 128, 5 blocks, `matern:100` noise of sigma 5, lr 5e-4 x 0.2 at
+    /// 40k/160k, batch 32, 240k steps, clip 1, augmentation, 20 midpoint
+    /// steps.
+    pub fn paper() -> Self {
+        Self {
+            width: 128,
+            blocks: 5,
+            noise: NoiseKind::Matern { tau: 100.0 },
+            sigma: 5.0,
+            ode_steps: 20,
+            schedule: Schedule {
+                lr: 5e-4,
+                batch: 32,
+                steps: 240_000,
+                milestones: vec![40_000, 160_000],
+                gamma: 0.2,
+                grad_clip: 1.0,
+                augment: true,
+                seed: 42,
+                checkpoint_every: 10_000,
+            },
+        }
+    }
+
+    /// A CPU-scale configuration: width 32, 3 blocks, 1500 steps of batch
+    /// 4 at lr 1e-3 (x 0.2 at 1000).
+    pub fn cpu() -> Self {
+        let mut c = Self::paper();
+        c.width = 32;
+        c.blocks = 3;
+        c.schedule.lr = 1e-3;
+        c.schedule.batch = 4;
+        c.schedule.steps = 1500;
+        c.schedule.milestones = vec![1000];
+        c.schedule.checkpoint_every = 250;
+        c
+    }
+
+    /// A preset by name ([`PRESETS`]).
+    ///
+    /// # Errors
+    /// [`FmError::Config`] for another name.
+    pub fn preset(name: &str) -> Result<Self> {
+        match name {
+            "paper" => Ok(Self::paper()),
+            "cpu" => Ok(Self::cpu()),
+            other => Err(FmError::Config(format!(
+                "unknown arbitrary-source preset {other:?}; expected one of {}",
+                PRESETS.join(", ")
+            ))),
+        }
+    }
+
+    /// The network for `k` predicted eigenvectors: positions in and out,
+    /// NJF head, `3 + 1 + k` conditioning channels.
+    pub fn net_config(&self, k: usize) -> PoissonNetConfig {
+        PoissonNetConfig {
+            width: self.width,
+            blocks: self.blocks,
+            vector_layers: 3,
+            in_channels: 3,
+            out_channels: 3,
+            cond_channels: 4 + k,
+            modulation: true,
+            head: HeadKind::Njf,
+        }
+    }
+}
+
+/// What [`ARBITRARY_SPEC`] holds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ArbitrarySpec {
+    /// The configuration.
+    pub config: FlowConfig,
+    /// The pairs dataset trained on.
+    pub dataset: PathBuf,
+    /// The predictor run it was trained with (its files are copied here).
+    pub predictor: PathBuf,
+    /// Vertices of the template.
+    pub vertices: usize,
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
+    serde_json::from_str(&text).map_err(|e| FmError::format(path, format!("{what}: {e}")))
+}
+
+/// The conditioning `[1, V, 3 + 1 + k]` of a source at time `t`.
+fn conditioning(source: &Tensor, t: f64, eigen: &Tensor) -> Tensor {
+    let v = source.size()[1];
+    let tt = Tensor::full([1, v, 1], t, (Kind::Float, source.device()));
+    Tensor::cat(&[source, &tt, eigen], 2)
+}
+
+/// Trains (or resumes) the flow in `run_dir` on the pairs of `dataset`
+/// with the finished predictor run `predictor`.
+///
+/// # Errors
+/// [`FmError::Config`] for a dataset that is not a pairs dataset, an
+/// unfinished predictor, a predictor of another template, or a
+/// configuration that differs from the stored one; data, noise, network
+/// and I/O errors.
+pub fn train(
+    run_dir: &Path,
+    dataset: &Path,
+    predictor_dir: &Path,
+    config: &FlowConfig,
+    stop: &AtomicBool,
+    progress: bool,
+) -> Result<TrainReport> {
+    let data = Dataset::open(dataset)?;
+    let Some(manifest) = PairsManifest::of(&data)? else {
+        return Err(FmError::Config(format!(
+            "{} is not a pairs dataset (made by `mfm dataset pairs`); the arbitrary-source \
+             model trains on (source, target) pairs",
+            dataset.display()
+        )));
+    };
+    let template = data.mesh().clone();
+    std::fs::create_dir_all(run_dir).map_err(|e| FmError::io(run_dir, e))?;
+    let spec_path = run_dir.join(ARBITRARY_SPEC);
+    if spec_path.is_file() {
+        let spec: ArbitrarySpec = read_json(&spec_path, "an arbitrary-source run's description")?;
+        if &spec.config != config {
+            return Err(FmError::Config(format!(
+                "{} was started with another configuration; resume it with the stored one \
+                 or train into a new folder",
+                run_dir.display()
+            )));
+        }
+    } else {
+        let source = EigenPredictor::load(predictor_dir)?;
+        if source.spec().vertices != template.num_vertices() {
+            return Err(FmError::Config(format!(
+                "the predictor in {} was trained on a template of {} vertices, the dataset's has {}",
+                predictor_dir.display(),
+                source.spec().vertices,
+                template.num_vertices()
+            )));
+        }
+        for (from, to) in [
+            (WEIGHTS_FILE, PREDICTOR_WEIGHTS),
+            (NET_CONFIG_FILE, "predictor.json"),
+        ] {
+            let (a, b) = (predictor_dir.join(from), run_dir.join(to));
+            let bytes = std::fs::read(&a).map_err(|e| FmError::io(&a, e))?;
+            crate::checkpoint::write_atomic(&b, &bytes)?;
+        }
+        mfm_files::write_json(run_dir.join(PREDICTOR_COPY_SPEC), source.spec())?;
+        mfm_files::write_json(
+            &spec_path,
+            &ArbitrarySpec {
+                config: config.clone(),
+                dataset: dataset.to_path_buf(),
+                predictor: predictor_dir.to_path_buf(),
+                vertices: template.num_vertices(),
+            },
+        )?;
+    }
+    let predictor = load_copied_predictor(run_dir)?;
+    let k = predictor.eigenvectors();
+    let meshes = data.load_all()?;
+    let pairs = manifest.space.pairs(meshes.len());
+    if pairs.is_empty() {
+        return Err(FmError::Config(format!(
+            "{} has no pairs (one pose per shape?)",
+            dataset.display()
+        )));
+    }
+    let sources = SourceSet::new(&template, config.noise)?;
+    let schedule = &config.schedule;
+    let (batch, sigma) = (schedule.batch, config.sigma as f32);
+    let device = Device::Cpu;
+    let mut eigen_cache: HashMap<usize, Tensor> = HashMap::new();
+    let mut opt = Optimization::start_or_resume(run_dir, &config.net_config(k), schedule, device)?;
+    opt.run(stop, progress, "arbitrary-source flow", |net, step| {
+        let mut rng = derived_rng(schedule.seed, PURPOSE_ITEMS, step);
+        let mut total = 0.0;
+        for j in 0..batch {
+            let (si, ti) = pairs[rng.random_range(0..pairs.len())];
+            let t = rng.random::<f64>();
+            let mut target = meshes.positions(ti);
+            let src = prepared(
+                meshes.positions(si),
+                Some(&mut target),
+                schedule.augment.then_some(&mut rng),
+            )?;
+            let ctx = if schedule.augment {
+                Arc::new(sources.build(src.clone())?)
+            } else {
+                sources.cached(si, src.clone())?
+            };
+            let x_src = positions_tensor(&src, device);
+            let eigen = match (schedule.augment, eigen_cache.get(&si)) {
+                (false, Some(e)) => e.shallow_clone(),
+                _ => {
+                    let e = predictor.predict_tensor(&ctx.tensors, &x_src)?;
+                    if !schedule.augment {
+                        eigen_cache.insert(si, e.shallow_clone());
+                    }
+                    e
+                }
+            };
+            let item = step as usize * batch + j;
+            let noise = ctx
+                .noise
+                .sample_range_f32(item, 1, 3, schedule.seed)?
+                .into_data();
+            let v = template.num_vertices() as i64;
+            let x0 = Tensor::from_slice(&noise).reshape([1, v, 3]) * f64::from(sigma);
+            let x0 = ctx.tensors.remove_mass_mean(&x0)?;
+            let x1 = ctx
+                .tensors
+                .remove_mass_mean(&positions_tensor(&target, device))?;
+            let xt = &x0 * (1.0 - t) + &x1 * t;
+            let delta = &x1 - &x0;
+            let cond = conditioning(&x_src, t, &eigen);
+            let out = net.forward(&ctx.tensors, &xt, Some(&cond))?;
+            let l = loss::flow_matching_loss(&ctx.tensors, &out, &delta)? / batch as f64;
+            total += l.double_value(&[]);
+            l.f_backward()?;
+        }
+        Ok(total)
+    })
+}
+
+fn load_copied_predictor(run_dir: &Path) -> Result<EigenPredictor> {
+    let spec: PredictorSpec = read_json(
+        &run_dir.join(PREDICTOR_COPY_SPEC),
+        "the copied predictor's description",
+    )?;
+    EigenPredictor::from_files(&run_dir.join(PREDICTOR_WEIGHTS), spec)
+}
+
+/// A finished arbitrary-source run, ready to generate on any source mesh.
+#[derive(Debug)]
+pub struct ArbitrarySampler {
+    net: PoissonNet,
+    predictor: EigenPredictor,
+    spec: ArbitrarySpec,
+}
+
+impl ArbitrarySampler {
+    /// Loads a finished run.
+    ///
+    /// # Errors
+    /// Missing or unreadable files, named; an unfinished run.
+    pub fn load(run_dir: &Path) -> Result<Self> {
+        let spec: ArbitrarySpec = read_json(
+            &run_dir.join(ARBITRARY_SPEC),
+            "an arbitrary-source run's description",
+        )?;
+        let weights = run_dir.join(WEIGHTS_FILE);
+        if !weights.is_file() {
+            return Err(FmError::Config(format!(
+                "{} has no finished model ({WEIGHTS_FILE}); train it to the end first",
+                run_dir.display()
+            )));
+        }
+        let predictor = load_copied_predictor(run_dir)?;
+        let mut net = PoissonNet::new(
+            &spec.config.net_config(predictor.eigenvectors()),
+            Device::Cpu,
+        )?;
+        net.load_weights(&weights)?;
+        Ok(Self {
+            net,
+            predictor,
+            spec,
+        })
+    }
+
+    /// The run's description.
+    pub fn spec(&self) -> &ArbitrarySpec {
+        &self.spec
+    }
+
+    /// The predictor the flow was trained with.
+    pub fn predictor(&self) -> &EigenPredictor {
+        &self.predictor
+    }
+
+    /// `count` targets generated over `source` (any mesh; its own frame,
+    /// the result back in its units), samples `first..first + count` of
+    /// `seed`'s noise stream. Each sample's noise depends only on `(seed,
+    /// index)`.
+    ///
+    /// Cost: the source's operators and factorizations once, the predictor
+    /// once, then `2 ode_steps` network evaluations per sample.
+    ///
+    /// # Errors
+    /// A degenerate source, noise and network errors;
+    /// [`FmError::Diverged`] for a non-finite result.
+    pub fn sample(
+        &self,
+        source: &TriMesh,
+        first: usize,
+        count: usize,
+        seed: u64,
+    ) -> Result<Vec<Vec<[f64; 3]>>> {
+        let mut positions = source.positions().to_vec();
+        let frame = to_own_frame(&mut positions, None)?;
+        let moved = source
+            .with_positions(positions.clone())
+            .map_err(|e| FmError::Config(e.to_string()))?;
+        let ctx = MeshContext::new(&moved, self.spec.config.noise)?;
+        let x_src = positions_tensor(&positions, Device::Cpu);
+        let eigen = self.predictor.predict_tensor(&ctx.tensors, &x_src)?;
+        let centroid = ctx.tensors.mass_weighted_mean(&x_src)?;
+        let v = source.num_vertices() as i64;
+        let steps = self.spec.config.ode_steps.max(1);
+        let h = 1.0 / steps as f64;
+        let velocity = |x: &Tensor, t: f64| -> Result<Tensor> {
+            let cond = conditioning(&x_src, t, &eigen);
+            Ok(tch::no_grad(|| self.net.forward(&ctx.tensors, x, Some(&cond)))?.vertex)
+        };
+        (first..first + count)
+            .map(|i| {
+                let noise = ctx.noise.sample_range_f32(i, 1, 3, seed)?.into_data();
+                let x0 = Tensor::from_slice(&noise).reshape([1, v, 3]) * self.spec.config.sigma;
+                let mut x = ctx.tensors.remove_mass_mean(&x0)?;
+                for s in 0..steps {
+                    let t = s as f64 * h;
+                    let mid = &x + velocity(&x, t)? * (h / 2.0);
+                    x = &x + velocity(&mid, t + h / 2.0)? * h;
+                }
+                let x = (x + &centroid).to_kind(Kind::Double).flatten(0, -1);
+                let flat = Vec::<f64>::try_from(x)?;
+                if flat.iter().any(|y| !y.is_finite()) {
+                    return Err(FmError::Diverged(format!(
+                        "sample {i} on the source is not finite after {steps} ODE steps"
+                    )));
+                }
+                Ok(flat
+                    .chunks_exact(3)
+                    .map(|c| frame.from_canonical([c[0], c[1], c[2]]))
+                    .collect())
+            })
+            .collect()
+    }
+
+    /// The predictor's output on `source` (`[V, k]`, vertex-major).
+    ///
+    /// # Errors
+    /// As [`EigenPredictor::predict`].
+    pub fn eigenvectors_on(&self, source: &TriMesh) -> Result<Vec<f32>> {
+        self.predictor.predict(source)
+    }
+
+    /// The flow network.
+    pub fn net(&self) -> &PoissonNet {
+        &self.net
+    }
+}

@@ -1,0 +1,357 @@
+//! The eigenvector predictor: a PoissonNet with a linear head that maps a
+//! source mesh's vertex positions (in its own canonical frame) to the
+//! template's first `k` Laplacian eigenvectors
+//! ([`mfm_data::eigenbasis::Eigenbasis`], signs fixed by its rule),
+//! trained on every mesh of a dataset of template shapes with the
+//! mass-weighted MSE of the source.
+//!
+//! Run folder: [`PREDICTOR_SPEC`] (configuration, dataset, eigenvalues and
+//! sign margins), [`TARGETS_FILE`] (the targets `[V, k]`), the log,
+//! checkpoints and, when finished, `model.safetensors` + `model.json`.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+use mfm_data::SignalSource;
+use mfm_data::dataset::Dataset;
+use mfm_data::eigenbasis::Eigenbasis;
+use mfm_geometry::TriMesh;
+use mfm_net::{HeadKind, MeshTensors, PoissonNet, PoissonNetConfig, loss};
+use mfm_noise::NoiseKind;
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+use tch::{Device, Kind, Tensor};
+
+use super::run::{Optimization, TrainReport};
+use super::sources::SourceSet;
+use super::{AUGMENT_SCALE, AUGMENT_SHIFT, Schedule, to_own_frame};
+use crate::checkpoint::WEIGHTS_FILE;
+use crate::error::{FmError, Result};
+use crate::train::derived_rng;
+
+/// The predictor run's description.
+pub const PREDICTOR_SPEC: &str = "predictor.json";
+/// The training targets, `[V, k]` f64.
+pub const TARGETS_FILE: &str = "targets.npy";
+
+const PURPOSE_ITEMS: u64 = 11;
+
+/// The predictor's network and training settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PredictorConfig {
+    /// `k`, eigenvectors predicted (the official 64).
+    pub eigenvectors: usize,
+    /// Network width.
+    pub width: usize,
+    /// Poisson blocks.
+    pub blocks: usize,
+    /// Optimization.
+    pub schedule: Schedule,
+}
+
+/// Preset names of [`PredictorConfig::preset`].
+pub const PRESETS: [&str; 2] = ["paper", "cpu"];
+
+impl PredictorConfig {
+    /// The official configuration (`moyo_eigenvecs_predictor.yaml`): 64
+    /// vectors, width 128, 3 blocks, lr 1e-3 x 0.1 at 20k/80k/200k,
+    /// batch 8, 240k steps, clip 1, augmentation.
+    pub fn paper() -> Self {
+        Self {
+            eigenvectors: 64,
+            width: 128,
+            blocks: 3,
+            schedule: Schedule {
+                lr: 1e-3,
+                batch: 8,
+                steps: 240_000,
+                milestones: vec![20_000, 80_000, 200_000],
+                gamma: 0.1,
+                grad_clip: 1.0,
+                augment: true,
+                seed: 42,
+                checkpoint_every: 10_000,
+            },
+        }
+    }
+
+    /// A CPU-scale configuration: width 32, 3 blocks, 1500 steps of batch
+    /// 4 (lr 1e-3, x 0.1 at 1000).
+    pub fn cpu() -> Self {
+        let mut c = Self::paper();
+        c.width = 32;
+        c.schedule.batch = 4;
+        c.schedule.steps = 1500;
+        c.schedule.milestones = vec![1000];
+        c.schedule.checkpoint_every = 250;
+        c
+    }
+
+    /// A preset by name ([`PRESETS`]).
+    ///
+    /// # Errors
+    /// [`FmError::Config`] for another name.
+    pub fn preset(name: &str) -> Result<Self> {
+        match name {
+            "paper" => Ok(Self::paper()),
+            "cpu" => Ok(Self::cpu()),
+            other => Err(FmError::Config(format!(
+                "unknown predictor preset {other:?}; expected one of {}",
+                PRESETS.join(", ")
+            ))),
+        }
+    }
+
+    /// The network: positions in, `k` channels out, linear head, no
+    /// conditioning.
+    pub fn net_config(&self) -> PoissonNetConfig {
+        PoissonNetConfig {
+            width: self.width,
+            blocks: self.blocks,
+            vector_layers: 3,
+            in_channels: 3,
+            out_channels: self.eigenvectors,
+            cond_channels: 0,
+            modulation: true,
+            head: HeadKind::Linear,
+        }
+    }
+}
+
+/// What [`PREDICTOR_SPEC`] holds.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PredictorSpec {
+    /// The configuration.
+    pub config: PredictorConfig,
+    /// The dataset trained on.
+    pub dataset: PathBuf,
+    /// Vertices of the template.
+    pub vertices: usize,
+    /// The template's eigenvalues (its canonical frame).
+    pub eigenvalues: Vec<f64>,
+    /// The sign rule's margins ([`Eigenbasis::margins`]).
+    pub margins: Vec<f64>,
+}
+
+fn read_json<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
+    serde_json::from_str(&text).map_err(|e| FmError::format(path, format!("{what}: {e}")))
+}
+
+/// A source moved into its own frame (and the same map applied to
+/// `also`), then scaled and shifted by the step's augmentation.
+pub(crate) fn prepared(
+    mut positions: Vec<[f64; 3]>,
+    mut also: Option<&mut Vec<[f64; 3]>>,
+    augment: Option<&mut rand_chacha::ChaCha8Rng>,
+) -> Result<Vec<[f64; 3]>> {
+    to_own_frame(
+        &mut positions,
+        also.as_deref_mut().map(|v| v.as_mut_slice()),
+    )?;
+    if let Some(rng) = augment {
+        let (lo, hi) = AUGMENT_SCALE;
+        let s = lo + (hi - lo) * rng.random::<f64>();
+        let shift: [f64; 3] = std::array::from_fn(|_| {
+            AUGMENT_SHIFT * <StandardNormal as Distribution<f64>>::sample(&StandardNormal, rng)
+        });
+        let map = |p: &mut [f64; 3]| *p = std::array::from_fn(|a| s * p[a] + shift[a]);
+        positions.iter_mut().for_each(map);
+        if let Some(q) = also {
+            q.iter_mut().for_each(map);
+        }
+    }
+    Ok(positions)
+}
+
+/// Positions as a `[1, V, 3]` float tensor on `device`.
+pub(crate) fn positions_tensor(p: &[[f64; 3]], device: Device) -> Tensor {
+    let flat: Vec<f32> = p.iter().flat_map(|q| q.map(|x| x as f32)).collect();
+    Tensor::from_slice(&flat)
+        .reshape([1, p.len() as i64, 3])
+        .to_device(device)
+}
+
+/// Trains (or resumes) an eigenvector predictor in `run_dir` on the meshes
+/// of `dataset` (3-channel position signals on the template; a pairs
+/// dataset's sources and targets alike).
+///
+/// A fresh run computes the template's basis and writes [`PREDICTOR_SPEC`]
+/// and [`TARGETS_FILE`]; a run folder that has them resumes from its newest
+/// valid checkpoint (with the stored configuration; `config` must equal
+/// it).
+///
+/// Cost per step: `batch` forward and backward passes, each on its own
+/// source's operators (numeric factorizations only; cached per mesh when
+/// not augmenting).
+///
+/// # Errors
+/// [`FmError::Config`] for a dataset that is not shapes of its mesh or a
+/// configuration that differs from the stored one; data, network and I/O
+/// errors.
+pub fn train(
+    run_dir: &Path,
+    dataset: &Path,
+    config: &PredictorConfig,
+    stop: &AtomicBool,
+    progress: bool,
+) -> Result<TrainReport> {
+    let data = Dataset::open(dataset)?;
+    if data.manifest().channels != 3 {
+        return Err(FmError::Config(format!(
+            "{}: the predictor learns from shapes (3-channel position signals), the dataset has {} channels",
+            dataset.display(),
+            data.manifest().channels
+        )));
+    }
+    let template = data.mesh().clone();
+    std::fs::create_dir_all(run_dir).map_err(|e| FmError::io(run_dir, e))?;
+    let spec_path = run_dir.join(PREDICTOR_SPEC);
+    let targets_path = run_dir.join(TARGETS_FILE);
+    let targets: Vec<f64> = if spec_path.is_file() {
+        let spec: PredictorSpec = read_json(&spec_path, "a predictor run's description")?;
+        if &spec.config != config {
+            return Err(FmError::Config(format!(
+                "{} was started with another configuration; resume it with the stored one \
+                 or train into a new folder",
+                run_dir.display()
+            )));
+        }
+        let t = mfm_files::npy::read::<f64>(&targets_path)?;
+        if t.shape != [template.num_vertices(), config.eigenvectors] {
+            return Err(FmError::format(
+                &targets_path,
+                format!("shape {:?} does not fit the dataset's template", t.shape),
+            ));
+        }
+        t.values
+    } else {
+        let basis = Eigenbasis::of(&template, config.eigenvectors)?;
+        let spec = PredictorSpec {
+            config: config.clone(),
+            dataset: dataset.to_path_buf(),
+            vertices: template.num_vertices(),
+            eigenvalues: basis.values.clone(),
+            margins: basis.margins.clone(),
+        };
+        mfm_files::npy::write(
+            &targets_path,
+            &basis.vectors,
+            &[template.num_vertices() as u64, config.eigenvectors as u64],
+        )?;
+        mfm_files::write_json(&spec_path, &spec)?;
+        basis.vectors
+    };
+    let device = Device::Cpu;
+    let k = config.eigenvectors as i64;
+    let v = template.num_vertices() as i64;
+    let target = Tensor::from_slice(&targets.iter().map(|&x| x as f32).collect::<Vec<_>>())
+        .reshape([1, v, k])
+        .to_device(device);
+    let meshes = data.load_all()?;
+    let sources = SourceSet::new(&template, NoiseKind::Naive)?;
+    let schedule = &config.schedule;
+    let batch = schedule.batch;
+    let mut opt = Optimization::start_or_resume(run_dir, &config.net_config(), schedule, device)?;
+    let n = meshes.len();
+    opt.run(stop, progress, "predictor", |net, step| {
+        let mut rng = derived_rng(schedule.seed, PURPOSE_ITEMS, step);
+        let mut total = 0.0;
+        for _ in 0..batch {
+            let i = rng.random_range(0..n);
+            let p = prepared(
+                meshes.positions(i),
+                None,
+                schedule.augment.then_some(&mut rng),
+            )?;
+            let ctx = if schedule.augment {
+                std::sync::Arc::new(sources.build(p.clone())?)
+            } else {
+                sources.cached(i, p.clone())?
+            };
+            let out = net.forward(&ctx.tensors, &positions_tensor(&p, device), None)?;
+            let l = loss::mass_weighted_mse(&ctx.tensors, &out.vertex, &target)? / batch as f64;
+            total += l.double_value(&[]);
+            l.f_backward()?;
+        }
+        Ok(total)
+    })
+}
+
+/// A trained predictor, ready to run on any mesh.
+#[derive(Debug)]
+pub struct EigenPredictor {
+    net: PoissonNet,
+    spec: PredictorSpec,
+}
+
+impl EigenPredictor {
+    /// Loads a finished predictor run (or a copy: `weights` with its
+    /// `.json` beside it, and `spec`).
+    ///
+    /// # Errors
+    /// Missing or unreadable files, named.
+    pub fn load(run_dir: &Path) -> Result<Self> {
+        let spec: PredictorSpec = read_json(
+            &run_dir.join(PREDICTOR_SPEC),
+            "a predictor run's description",
+        )?;
+        let weights = run_dir.join(WEIGHTS_FILE);
+        if !weights.is_file() {
+            return Err(FmError::Config(format!(
+                "{} has no finished predictor ({WEIGHTS_FILE}); train it to the end first",
+                run_dir.display()
+            )));
+        }
+        Self::from_files(&weights, spec)
+    }
+
+    pub(crate) fn from_files(weights: &Path, spec: PredictorSpec) -> Result<Self> {
+        let mut net = PoissonNet::new(&spec.config.net_config(), Device::Cpu)?;
+        net.load_weights(weights)?;
+        Ok(Self { net, spec })
+    }
+
+    /// The run's description.
+    pub fn spec(&self) -> &PredictorSpec {
+        &self.spec
+    }
+
+    /// `k`.
+    pub fn eigenvectors(&self) -> usize {
+        self.spec.config.eigenvectors
+    }
+
+    /// The network.
+    pub fn net(&self) -> &PoissonNet {
+        &self.net
+    }
+
+    /// The prediction `[1, V, k]` for positions `x: [1, V, 3]` (already in
+    /// the source's frame) on `mesh`'s tensors, without gradients.
+    ///
+    /// # Errors
+    /// Shape errors of the network.
+    pub fn predict_tensor(&self, mesh: &MeshTensors, x: &Tensor) -> Result<Tensor> {
+        let out = tch::no_grad(|| self.net.forward(mesh, x, None))?;
+        Ok(out.vertex.detach())
+    }
+
+    /// The prediction on `mesh` (any triangulation; moved into its own
+    /// frame first), vertex-major `[V, k]`.
+    ///
+    /// # Errors
+    /// A degenerate mesh, network errors.
+    pub fn predict(&self, mesh: &TriMesh) -> Result<Vec<f32>> {
+        let p = prepared(mesh.positions().to_vec(), None, None)?;
+        let moved = mesh
+            .with_positions(p.clone())
+            .map_err(|e| FmError::Config(e.to_string()))?;
+        let tensors = MeshTensors::new(&moved)?;
+        let y = self.predict_tensor(&tensors, &positions_tensor(&p, Device::Cpu))?;
+        Ok(Vec::<f32>::try_from(y.to_kind(Kind::Float).flatten(0, -1))?)
+    }
+}

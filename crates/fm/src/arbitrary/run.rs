@@ -1,0 +1,248 @@
+//! The optimization loop both arbitrary-source trainings share: Adam with
+//! gradient clipping and a step-decay schedule, a CSV log, atomic
+//! checkpoints every few steps, resumption from the newest valid one, and
+//! a stop flag checked between steps.
+
+use std::collections::BTreeMap;
+use std::fs::OpenOptions;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use mfm_net::{PoissonNet, PoissonNetConfig};
+use tch::Device;
+
+use super::Schedule;
+use crate::adam::Adam;
+use crate::checkpoint::{
+    self, CheckpointState, LOG_FILE, LogAccumulator, NET_CONFIG_FILE, OPTIMIZER_FILE, WEIGHTS_FILE,
+};
+use crate::error::{FmError, Result};
+use crate::train::{INIT_LOCK, LOG_HEADER, truncate_log};
+
+/// Rows of the log: one per this many steps.
+const LOG_EVERY: u64 = 10;
+/// Checkpoints kept.
+const KEEP: usize = 2;
+/// What a checkpoint's `rng` field says.
+const RNG: &str = "every random choice of step s is a pure function of (seed, s)";
+
+/// What a training call did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrainReport {
+    /// The step the call started at (> 0 when resumed).
+    pub start_step: u64,
+    /// The step it stopped at.
+    pub end_step: u64,
+    /// The configured total.
+    pub total_steps: u64,
+    /// Whether the total was reached (the final model is written).
+    pub finished: bool,
+    /// Whether the stop flag ended it.
+    pub stopped: bool,
+    /// Seconds of this call.
+    pub seconds: f64,
+    /// The loss of the last step.
+    pub last_loss: Option<f64>,
+    /// The final weights, when finished.
+    pub model: Option<PathBuf>,
+    /// Newer checkpoints that failed their check and were passed over on
+    /// resuming (folder and reason).
+    pub skipped_checkpoints: Vec<String>,
+}
+
+/// A network with its optimizer in a run folder.
+#[derive(Debug)]
+pub(crate) struct Optimization {
+    pub(crate) net: PoissonNet,
+    adam: Adam,
+    schedule: Schedule,
+    run_dir: PathBuf,
+    step: u64,
+    elapsed: f64,
+    last_loss: Option<f64>,
+    skipped: Vec<String>,
+}
+
+impl Optimization {
+    /// A fresh network (initial weights from the schedule's seed), or the
+    /// state of the newest valid checkpoint of `run_dir` when there is one.
+    pub(crate) fn start_or_resume(
+        run_dir: &Path,
+        net: &PoissonNetConfig,
+        schedule: &Schedule,
+        device: Device,
+    ) -> Result<Self> {
+        schedule.validate()?;
+        mfm_net::runtime::tune_allocator();
+        checkpoint::remove_stale_temporaries(run_dir)?;
+        let mut network = {
+            let _guard = INIT_LOCK.lock().unwrap_or_else(|p| p.into_inner());
+            tch::manual_seed(schedule.seed as i64);
+            PoissonNet::new(net, device)?
+        };
+        let mut adam = Adam::new(&network, 0.9, 0.999, 1e-8);
+        let (newest, rejected) = checkpoint::newest_valid_with(run_dir, |dir| {
+            checkpoint::verify_checkpoint_listing(
+                dir,
+                &[WEIGHTS_FILE, NET_CONFIG_FILE, OPTIMIZER_FILE],
+            )
+        })?;
+        let skipped = rejected
+            .into_iter()
+            .map(|(dir, e)| format!("{}: {e}", dir.display()))
+            .collect();
+        let log = run_dir.join(LOG_FILE);
+        let (step, elapsed, last_loss) = match newest {
+            Some((info, state)) => {
+                network.load_weights(info.dir.join(WEIGHTS_FILE))?;
+                adam.load(&info.dir.join(OPTIMIZER_FILE), state.step)?;
+                truncate_log(&log, state.step)?;
+                (state.step, state.elapsed_seconds, state.last_loss)
+            }
+            None => {
+                checkpoint::write_atomic(&log, format!("{LOG_HEADER}\n").as_bytes())?;
+                (0, 0.0, None)
+            }
+        };
+        Ok(Self {
+            net: network,
+            adam,
+            schedule: schedule.clone(),
+            run_dir: run_dir.to_path_buf(),
+            step,
+            elapsed,
+            last_loss,
+            skipped,
+        })
+    }
+
+    fn write_checkpoint(&self) -> Result<()> {
+        let state = CheckpointState {
+            format: checkpoint::STATE_FORMAT,
+            step: self.step,
+            seed: self.schedule.seed,
+            rng: RNG.into(),
+            elapsed_seconds: self.elapsed,
+            last_loss: self.last_loss,
+            log: LogAccumulator::default(),
+            files: BTreeMap::new(),
+        };
+        let (net, adam) = (&self.net, &self.adam);
+        checkpoint::write_checkpoint(&self.run_dir, state, |tmp| {
+            net.save(tmp.join(WEIGHTS_FILE))?;
+            adam.save(&tmp.join(OPTIMIZER_FILE))
+        })?;
+        checkpoint::prune_checkpoints(&self.run_dir, KEEP)?;
+        Ok(())
+    }
+
+    /// Runs steps until the total or `stop`. `step_fn(net, step)` runs the
+    /// forward and backward passes of step `step` (gradients accumulate
+    /// into the network's variables) and returns its loss; this loop zeroes
+    /// the gradients before, clips and applies Adam after.
+    pub(crate) fn run(
+        &mut self,
+        stop: &AtomicBool,
+        progress: bool,
+        what: &str,
+        mut step_fn: impl FnMut(&PoissonNet, u64) -> Result<f64>,
+    ) -> Result<TrainReport> {
+        let total = self.schedule.steps;
+        let start_step = self.step;
+        let target = if progress {
+            ProgressDrawTarget::stderr()
+        } else {
+            ProgressDrawTarget::hidden()
+        };
+        let bar = ProgressBar::with_draw_target(Some(total), target).with_position(start_step);
+        if let Ok(style) = ProgressStyle::with_template(
+            "{prefix} {elapsed_precise} [{bar:30}] {pos}/{len} eta {eta} {msg}",
+        ) {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        bar.set_prefix(what.to_owned());
+        let log_path = self.run_dir.join(LOG_FILE);
+        let mut log = OpenOptions::new()
+            .append(true)
+            .create(true)
+            .open(&log_path)
+            .map_err(|e| FmError::io(&log_path, e))?;
+        let session = Instant::now();
+        let base = self.elapsed;
+        let mut acc = LogAccumulator::default();
+        let mut stopped = false;
+        let mut last_checkpoint = None;
+        while self.step < total {
+            if stop.load(Ordering::Relaxed) {
+                stopped = true;
+                break;
+            }
+            self.adam.zero_grad();
+            let s = self.step;
+            let loss = step_fn(&self.net, s)?;
+            if !loss.is_finite() {
+                return Err(FmError::Diverged(format!(
+                    "{what} diverged at step {s}: the loss is {loss}; lower the learning rate \
+                     (the last checkpoint is intact)"
+                )));
+            }
+            let grad_norm = self.adam.clip_grad_norm(self.schedule.grad_clip)?;
+            let lr = self.schedule.lr_at(s);
+            self.adam.step(lr)?;
+            self.step += 1;
+            self.last_loss = Some(loss);
+            self.elapsed = base + session.elapsed().as_secs_f64();
+            acc.loss_sum += loss;
+            acc.grad_norm_sum += grad_norm;
+            acc.count += 1;
+            if self.step % LOG_EVERY == 0 || self.step == total {
+                let n = acc.count.max(1) as f64;
+                let row = format!(
+                    "{},{},{},{},{:.3}\n",
+                    self.step,
+                    acc.loss_sum / n,
+                    lr,
+                    acc.grad_norm_sum / n,
+                    self.elapsed
+                );
+                log.write_all(row.as_bytes())
+                    .and_then(|()| log.flush())
+                    .map_err(|e| FmError::io(&log_path, e))?;
+                acc = LogAccumulator::default();
+            }
+            bar.set_position(self.step);
+            bar.set_message(format!("loss {loss:.4e} lr {lr:.1e}"));
+            if self.step % self.schedule.checkpoint_every == 0 || self.step == total {
+                self.write_checkpoint()?;
+                last_checkpoint = Some(self.step);
+            }
+        }
+        if last_checkpoint != Some(self.step) && self.step > start_step {
+            self.write_checkpoint()?;
+        }
+        bar.finish_and_clear();
+        let finished = self.step >= total;
+        let model = if finished {
+            let path = self.run_dir.join(WEIGHTS_FILE);
+            self.net.save(&path)?;
+            checkpoint::write_final_record(&self.run_dir)?;
+            Some(path)
+        } else {
+            None
+        };
+        Ok(TrainReport {
+            start_step,
+            end_step: self.step,
+            total_steps: total,
+            finished,
+            stopped,
+            seconds: session.elapsed().as_secs_f64(),
+            last_loss: self.last_loss,
+            model,
+            skipped_checkpoints: std::mem::take(&mut self.skipped),
+        })
+    }
+}

@@ -1,0 +1,207 @@
+//! The arbitrary-source model end to end at toy size: a pairs dataset of a
+//! capsule, the eigenvector predictor, the flow, sampling on a held-out
+//! shape of the template and on a held-out shape of another triangulation,
+//! and an interrupted run resumed to the same weights.
+#![allow(clippy::unwrap_used)]
+
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+use mfm_data::dataset::Dataset;
+use mfm_data::deformations::{self, DeformMeshes};
+use mfm_data::pairs::{self, PairSpace};
+use mfm_deform::ShapeFamily;
+use mfm_fm::arbitrary::flow::{self, ArbitrarySampler, FlowConfig};
+use mfm_fm::arbitrary::predictor::{self, EigenPredictor, PredictorConfig};
+use mfm_geometry::procedural;
+
+struct Toy {
+    meshes: DeformMeshes,
+    space: PairSpace,
+}
+
+fn toy() -> Toy {
+    let capsule = procedural::capsule(0.5, 0.75, 10, 24).unwrap();
+    let meshes = DeformMeshes::from_mesh(&capsule, 300).unwrap();
+    let poses = deformations::space_for(&meshes.original, 2, 0.15, 0.4, 0.08).unwrap();
+    let family = ShapeFamily::auto(&meshes.original, 3).unwrap();
+    Toy {
+        meshes,
+        space: PairSpace {
+            family,
+            poses,
+            poses_per_shape: 2,
+        },
+    }
+}
+
+fn write(t: &Toy, dir: &Path, mesh: &mfm_geometry::TriMesh, seed: u64, shapes: usize) -> Dataset {
+    pairs::write_dataset(
+        dir,
+        mesh,
+        &t.space,
+        seed,
+        0..shapes,
+        t.meshes.normalization,
+        t.meshes.frame,
+        "test",
+        "test",
+        false,
+    )
+    .unwrap()
+}
+
+fn tiny_predictor() -> PredictorConfig {
+    let mut c = PredictorConfig::cpu();
+    c.eigenvectors = 6;
+    c.width = 8;
+    c.blocks = 1;
+    c.schedule.steps = 6;
+    c.schedule.batch = 2;
+    c.schedule.checkpoint_every = 3;
+    c.schedule.milestones = vec![];
+    c
+}
+
+fn tiny_flow() -> FlowConfig {
+    let mut c = FlowConfig::cpu();
+    c.width = 8;
+    c.blocks = 1;
+    c.ode_steps = 3;
+    c.schedule.steps = 6;
+    c.schedule.batch = 2;
+    c.schedule.checkpoint_every = 3;
+    c.schedule.milestones = vec![];
+    c
+}
+
+#[test]
+fn trains_and_samples_on_unseen_sources_of_any_triangulation() {
+    let t = toy();
+    let dir = tempfile::tempdir().unwrap();
+    let train = write(&t, &dir.path().join("train"), &t.meshes.coarse, 1, 3);
+    let stop = AtomicBool::new(false);
+    let p_dir = dir.path().join("predictor");
+    let report = predictor::train(&p_dir, train.dir(), &tiny_predictor(), &stop, false).unwrap();
+    assert!(report.finished && report.model.is_some());
+    let eigen = EigenPredictor::load(&p_dir).unwrap();
+    assert_eq!(eigen.spec().eigenvalues.len(), 6);
+
+    // the flow refuses a dataset that is not pairs and an unfinished predictor
+    let gmm_like = deformations::write_dataset(
+        &dir.path().join("deform"),
+        &t.meshes.coarse,
+        &t.space.poses,
+        1,
+        0..2,
+        t.meshes.normalization,
+        t.meshes.frame,
+        "coarse",
+        "test",
+        false,
+    )
+    .unwrap();
+    let e = flow::train(
+        &dir.path().join("bad"),
+        gmm_like.dir(),
+        &p_dir,
+        &tiny_flow(),
+        &stop,
+        false,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("not a pairs dataset"), "{e}");
+    let e = flow::train(
+        &dir.path().join("bad2"),
+        train.dir(),
+        &dir.path().join("nowhere"),
+        &tiny_flow(),
+        &stop,
+        false,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("nowhere"), "{e}");
+
+    let f_dir = dir.path().join("flow");
+    let report = flow::train(&f_dir, train.dir(), &p_dir, &tiny_flow(), &stop, false).unwrap();
+    assert!(report.finished);
+    assert!(report.last_loss.unwrap().is_finite());
+    let sampler = ArbitrarySampler::load(&f_dir).unwrap();
+
+    // unseen shapes: the same connectivity, and another triangulation
+    let held = write(&t, &dir.path().join("held"), &t.meshes.coarse, 99, 1);
+    let remeshed = write(&t, &dir.path().join("remeshed"), &t.meshes.eval, 99, 1);
+    for set in [&held, &remeshed] {
+        let mesh = set.mesh();
+        let source = mesh
+            .with_positions(set.load_all().unwrap().positions(0))
+            .unwrap();
+        let out = sampler.sample(&source, 0, 2, 7).unwrap();
+        assert_eq!(out.len(), 2);
+        assert!(out.iter().all(|s| s.len() == mesh.num_vertices()));
+        assert!(out.iter().flatten().flatten().all(|x| x.is_finite()));
+        // the same seed and index give the same sample; another index another
+        let again = sampler.sample(&source, 1, 1, 7).unwrap();
+        assert_eq!(again[0], out[1]);
+        assert_ne!(out[0], out[1]);
+        // generated targets sit where the source is, at its size
+        let (lo, hi) = source.bounding_box();
+        let centre: Vec<f64> = (0..3).map(|a| 0.5 * (lo[a] + hi[a])).collect();
+        let n = out[0].len() as f64;
+        for a in 0..3 {
+            let mean = out[0].iter().map(|p| p[a]).sum::<f64>() / n;
+            assert!(
+                (mean - centre[a]).abs() < 0.5,
+                "axis {a}: {mean} vs {}",
+                centre[a]
+            );
+        }
+        let eigen = sampler.eigenvectors_on(&source).unwrap();
+        assert_eq!(eigen.len(), mesh.num_vertices() * 6);
+    }
+}
+
+#[test]
+fn an_interrupted_run_resumes_to_the_same_weights() {
+    let t = toy();
+    let dir = tempfile::tempdir().unwrap();
+    let train = write(&t, &dir.path().join("train"), &t.meshes.coarse, 1, 2);
+    let stop = AtomicBool::new(false);
+    let whole = dir.path().join("whole");
+    predictor::train(&whole, train.dir(), &tiny_predictor(), &stop, false).unwrap();
+    // a copy of the run as it was after the first checkpoint (step 3)
+    let cut = dir.path().join("cut");
+    std::fs::create_dir(&cut).unwrap();
+    for name in ["predictor.json", "targets.npy", "train_log.csv"] {
+        std::fs::copy(whole.join(name), cut.join(name)).unwrap();
+    }
+    let ck = mfm_fm::checkpoint::checkpoint_dir(&whole, 3);
+    let dest = mfm_fm::checkpoint::checkpoint_dir(&cut, 3);
+    std::fs::create_dir_all(&dest).unwrap();
+    for e in std::fs::read_dir(&ck).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dest.join(e.file_name())).unwrap();
+    }
+    let report = predictor::train(&cut, train.dir(), &tiny_predictor(), &stop, false).unwrap();
+    assert_eq!((report.start_step, report.end_step), (3, 6));
+    assert_eq!(
+        std::fs::read(whole.join("model.safetensors")).unwrap(),
+        std::fs::read(cut.join("model.safetensors")).unwrap()
+    );
+    // the log has one row per 10 steps or the last: the same rows
+    assert_eq!(
+        std::fs::read_to_string(whole.join("train_log.csv"))
+            .unwrap()
+            .lines()
+            .count(),
+        std::fs::read_to_string(cut.join("train_log.csv"))
+            .unwrap()
+            .lines()
+            .count()
+    );
+    // another configuration in the same folder is refused
+    let mut other = tiny_predictor();
+    other.width = 16;
+    let e = predictor::train(&cut, train.dir(), &other, &stop, false).unwrap_err();
+    assert!(e.to_string().contains("another configuration"), "{e}");
+}
