@@ -136,6 +136,16 @@ pub enum Command {
     /// Metrics of generated samples against a reference dataset: MMD, COV,
     /// 1-NNA, GMM test error.
     Eval(crate::eval::EvalArgs),
+    /// Evaluate an arbitrary-source run on the held-out shapes of a pairs
+    /// experiment (`mfm dataset pairs` OUT): projection onto each source's
+    /// own deformation space, displacement, pose spread, MMD/COV, the
+    /// predictor's error; on OUT/holdout (the template's triangulation) and
+    /// OUT/reference (another triangulation), with pictures.
+    #[cfg(feature = "network")]
+    EvalArbitrary(crate::arbitrary::EvalArgs),
+    /// Evaluate an arbitrary-source run (needs the `network` feature).
+    #[cfg(not(feature = "network"))]
+    EvalArbitrary(crate::unavailable::Unavailable),
     /// PoissonNet: layer tables of the presets and training-step benchmarks.
     #[cfg(feature = "network")]
     #[command(subcommand)]
@@ -217,6 +227,10 @@ pub fn run(cmd: Command) -> Result<()> {
         Command::Sample(_) => crate::unavailable::fail("sample"),
         #[cfg(not(feature = "network"))]
         Command::Net(_) => crate::unavailable::fail("net"),
+        #[cfg(feature = "network")]
+        Command::EvalArbitrary(args) => crate::arbitrary::eval(args),
+        #[cfg(not(feature = "network"))]
+        Command::EvalArbitrary(_) => crate::unavailable::fail("eval-arbitrary"),
         Command::Eval(args) => crate::eval::eval(args),
         Command::Remesh(args) => crate::remesh::run(args),
     }

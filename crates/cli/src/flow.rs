@@ -31,9 +31,21 @@ pub struct TrainArgs {
     /// Named configuration: `cpu` (scalar signals, minutes on a laptop),
     /// `cpu-deform` (`cpu` conditioned on the source xyz, for `mfm dataset
     /// deform` data), `paper` (the authors' human-pose recipe, for a GPU) or
-    /// `paper-elastic` (their elastic-deformation recipe).
+    /// `paper-elastic` (their elastic-deformation recipe). With --mode
+    /// predictor or arbitrary: `cpu` (default) or `paper` (the official
+    /// arbitrary-source configurations).
     #[arg(long)]
     preset: Option<String>,
+    /// What to train: flow (one mesh, the default), predictor (the
+    /// arbitrary-source model's eigenvector predictor, on OUT/train of
+    /// `mfm dataset pairs`) or arbitrary (the arbitrary-source flow, on the
+    /// same dataset, with --predictor).
+    #[arg(long, value_enum, default_value = "flow")]
+    mode: crate::arbitrary::TrainMode,
+    /// The finished predictor run the arbitrary-source flow conditions on
+    /// (--mode arbitrary).
+    #[arg(long)]
+    predictor: Option<PathBuf>,
     /// Dataset folder (overrides the configuration's dataset.path).
     #[arg(long)]
     dataset: Option<PathBuf>,
@@ -70,8 +82,13 @@ pub struct SampleArgs {
     #[arg(long)]
     run: PathBuf,
     /// Mesh to generate on: any triangulation of the training surface.
+    #[arg(long, required_unless_present = "source", conflicts_with = "source")]
+    mesh: Option<String>,
+    /// Source mesh of an arbitrary-source run (`mfm train --mode
+    /// arbitrary`): any mesh of a shape like the template's, of any
+    /// triangulation; targets are generated over it.
     #[arg(long)]
-    mesh: String,
+    source: Option<String>,
     /// Number of samples.
     #[arg(long, default_value_t = 16)]
     n: usize,
@@ -122,6 +139,28 @@ pub fn train(a: TrainArgs) -> Result<()> {
                 "mfm: warning: cannot install the Ctrl-C handler ({e}); Ctrl-C will lose the steps since the last checkpoint"
             );
         }
+    }
+    if a.mode != crate::arbitrary::TrainMode::Flow {
+        if a.config.is_some() || a.noise.is_some() || a.device.is_some() {
+            bail!("--config, --noise and --device are options of --mode flow");
+        }
+        return crate::arbitrary::train(
+            crate::arbitrary::ArbitraryTrain {
+                mode: a.mode,
+                preset: a.preset.as_deref(),
+                dataset: a.dataset.as_deref(),
+                predictor: a.predictor.as_deref(),
+                out: &a.out,
+                steps: a.steps,
+                seed: a.seed,
+                resume: a.resume,
+                quiet: a.quiet,
+            },
+            &stop,
+        );
+    }
+    if a.predictor.is_some() {
+        bail!("--predictor is an option of --mode arbitrary");
     }
     // A fresh run that fails before its first checkpoint leaves nothing.
     let mut fresh: Option<mfm_files::Undo> = None;
@@ -310,12 +349,25 @@ pub fn sample(a: SampleArgs) -> Result<()> {
             SAMPLE_FILES.join(", ")
         );
     }
-    let mesh = load_mesh_checked(&a.mesh)?;
+    if crate::arbitrary::is_arbitrary_run(&a.run) {
+        let source = a
+            .source
+            .as_deref()
+            .or(a.mesh.as_deref())
+            .unwrap_or_default();
+        return crate::arbitrary::sample(&a.run, source, a.n, a.seed, &a.out, a.ply);
+    }
+    let Some(mesh_arg) = a.mesh.as_deref() else {
+        bail!(
+            "--source is for arbitrary-source runs (mfm train --mode arbitrary); {} is a flow on one mesh: pass --mesh",
+            a.run.display()
+        );
+    };
+    let mesh = load_mesh_checked(mesh_arg)?;
     let sampler = Sampler::load(&a.run, Some(a.device.resolve()?))?;
     for w in sampler.surface_warnings(&mesh) {
         eprintln!(
-            "warning: {}: {w}; the run's frame assumes the sampling mesh is the training surface in the dataset's units",
-            a.mesh
+            "warning: {mesh_arg}: {w}; the run's frame assumes the sampling mesh is the training surface in the dataset's units"
         );
     }
     let run_config = RunConfig::from_toml_file(a.run.join(CONFIG_FILE)).ok();
@@ -346,7 +398,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     ]
     .map(|f| a.run.join(f));
     let mut inputs: Vec<Option<&Path>> = run_files.iter().map(|p| Some(p.as_path())).collect();
-    inputs.push(mesh_path(&a.mesh));
+    inputs.push(mesh_path(mesh_arg));
     let undo = prepare_outputs(&inputs, &outputs)?;
     let shape = [n as u64, v as u64, c as u64];
     mfm_files::space::ensure_space(

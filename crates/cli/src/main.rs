@@ -3,6 +3,8 @@
 //! Thin by design: it parses arguments and calls the library crates. Every
 //! failure ends with a non-zero exit status and a one-line reason on stderr.
 
+#[cfg(feature = "network")]
+mod arbitrary;
 mod commands;
 mod dataset;
 mod eval;

@@ -31,6 +31,7 @@
 //! pure function of `(seed, s)`, so a resumed run repeats an uninterrupted
 //! one.
 
+pub mod evaluate;
 pub mod flow;
 pub mod predictor;
 mod run;

@@ -1,0 +1,198 @@
+//! How well an arbitrary-source model does on held-out body shapes: its
+//! targets projected onto each source's own deformation space, their
+//! distance from the source against the data's, the pose spread, MMD/COV
+//! against the held-out meshes, and the predictor's error.
+//!
+//! A set is a pairs dataset of held-out shapes (`holdout`: the template's
+//! triangulation; `reference`: another triangulation of the same surface).
+//! The source of shape `s` is its first pose; the model generates targets
+//! over it. Measures (positions in the dataset's units, the normalized
+//! frame of `mfm dataset pairs`):
+//!
+//! - **projection**: mass-weighted MSE of each target to its projection
+//!   onto the poses of the source's body shape ([`mfm_deform::project`]
+//!   with [`mfm_deform::ShapeFamily::pose_space`]); the floor is the same
+//!   number for the set's own meshes. A target of the wrong body shape, a
+//!   broken or noisy one, scores far above the floor.
+//! - **displacement ratio**: median RMS distance of the targets from their
+//!   source over the median RMS distance between two poses of one shape in
+//!   the set. A model that copies its source scores 0, one that moves too
+//!   much scores above 1.
+//! - **pose spread** ([`ParamSpread`]) of the projections' handle motions,
+//!   beside the set's own: a collapsed model has none.
+//! - **MMD / COV** of the targets against every mesh of the set (mass
+//!   weights of the set's mesh).
+//! - **predictor error**: per source, the mean over vectors `1..k` of the
+//!   mass-weighted relative error of the predicted eigenvectors against the
+//!   basis of the set's rest mesh ([`relative_errors`]).
+
+use std::path::Path;
+use std::time::Instant;
+
+use mfm_data::dataset::Dataset;
+use mfm_data::eigenbasis::{Eigenbasis, relative_errors};
+use mfm_data::metrics::{MassWeighted, coverage, mmd};
+use mfm_data::pairs::{self, PairsManifest};
+use mfm_data::quality::{ParamSpread, Quartiles};
+use mfm_data::{InMemorySignals, SignalSource};
+use mfm_deform::{Arap, DeformParams, project};
+use mfm_geometry::TriMesh;
+use serde::{Deserialize, Serialize};
+
+use super::flow::ArbitrarySampler;
+use crate::error::{FmError, Result};
+
+/// The measures of one held-out set; see the [module docs](self).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SetEvaluation {
+    /// The set's folder name.
+    pub set: String,
+    /// Vertices of its mesh.
+    pub vertices: usize,
+    /// Sources evaluated (one per held-out shape, at most the requested
+    /// number).
+    pub sources: usize,
+    /// Targets generated per source.
+    pub samples_per_source: usize,
+    /// Projection error of the generated targets.
+    pub projection: Quartiles,
+    /// Projection error of the set's own meshes (the floor).
+    pub projection_floor: Quartiles,
+    /// Median target-to-source distance over the data's.
+    pub displacement_ratio: f64,
+    /// Pose spread of the generated targets' projections.
+    pub pose_spread: ParamSpread,
+    /// Pose spread of the set's own meshes' projections.
+    pub reference_pose_spread: ParamSpread,
+    /// Minimum matching distance to the set's meshes.
+    pub mmd: f64,
+    /// Coverage of the set's meshes.
+    pub cov: f64,
+    /// The predictor's mean relative error per source.
+    pub predictor_error: Quartiles,
+    /// Seconds per generated target.
+    pub seconds_per_sample: f64,
+}
+
+/// One source with its generated targets and a true other pose, for
+/// pictures.
+#[derive(Clone, Debug)]
+pub struct Example {
+    /// The source mesh.
+    pub source: TriMesh,
+    /// Generated targets (positions on the source's vertices).
+    pub generated: Vec<Vec<[f64; 3]>>,
+    /// Another pose of the same shape from the data.
+    pub truth: Vec<[f64; 3]>,
+}
+
+fn rms(a: &[[f64; 3]], b: &[[f64; 3]], mass: &[f64]) -> f64 {
+    let total: f64 = mass.iter().sum();
+    let s: f64 = a
+        .iter()
+        .zip(b)
+        .zip(mass)
+        .map(|((p, q), m)| m * (0..3).map(|k| (p[k] - q[k]).powi(2)).sum::<f64>())
+        .sum();
+    (s / total).sqrt()
+}
+
+/// Evaluates `sampler` on the held-out pairs dataset `set` (see the
+/// [module docs](self)): `per_source` targets over each of the first
+/// `sources` shapes' first poses, noise `seed`. Returns the measures and
+/// the examples.
+///
+/// # Errors
+/// [`FmError::Config`] for a set that is not a pairs dataset; data, shape,
+/// sampling errors.
+pub fn evaluate_set(
+    sampler: &ArbitrarySampler,
+    set: &Path,
+    sources: usize,
+    per_source: usize,
+    seed: u64,
+) -> Result<(SetEvaluation, Vec<Example>)> {
+    let data = Dataset::open(set)?;
+    let Some(manifest) = PairsManifest::of(&data)? else {
+        return Err(FmError::Config(format!(
+            "{} is not a pairs dataset",
+            set.display()
+        )));
+    };
+    let params = pairs::read_params(&data)?;
+    let space = &manifest.space;
+    let p = space.poses_per_shape;
+    let rest = data.mesh().clone();
+    let meshes = data.load_all()?;
+    let shapes = (meshes.len() / p).min(sources.max(1));
+    let mass = mfm_geometry::operators::lumped_mass(&rest);
+    let k = sampler.predictor().eigenvectors();
+    let basis = Eigenbasis::of(&rest, k)?;
+    let (mut projection, mut floor, mut moved, mut data_moved) = (vec![], vec![], vec![], vec![]);
+    let (mut gen_params, mut ref_params, mut predictor_error) = (vec![], vec![], vec![]);
+    let mut generated_all: Vec<f32> = Vec::new();
+    let mut examples = Vec::new();
+    let mut seconds = 0.0;
+    for s in 0..shapes {
+        let shape = &params.shapes[s];
+        let member = space.family.realize(&rest, shape)?;
+        let (posing, regions) = space.family.pose_space(&rest, &space.poses, shape)?;
+        let arap = Arap::with_regions(&member, &posing.handles, regions)?;
+        let poses: Vec<Vec<[f64; 3]>> = (0..p).map(|a| meshes.positions(s * p + a)).collect();
+        for q in &poses {
+            let pr = project(&arap, &posing, q)?;
+            floor.push(pr.mse);
+            ref_params.push(pr.params);
+        }
+        for q in &poses[1..] {
+            data_moved.push(rms(q, &poses[0], &mass));
+        }
+        let source = rest
+            .with_positions(poses[0].clone())
+            .map_err(|e| FmError::Config(e.to_string()))?;
+        let t0 = Instant::now();
+        let out = sampler.sample(&source, s * per_source, per_source, seed)?;
+        seconds += t0.elapsed().as_secs_f64();
+        for g in &out {
+            let pr = project(&arap, &posing, g)?;
+            projection.push(pr.mse);
+            gen_params.push(pr.params);
+            moved.push(rms(g, &poses[0], &mass));
+            generated_all.extend(g.iter().flat_map(|x| x.map(|y| y as f32)));
+        }
+        let predicted = sampler.eigenvectors_on(&source)?;
+        let errors = relative_errors(&rest, &basis, &predicted)?;
+        predictor_error.push(errors[1..].iter().sum::<f64>() / (k - 1).max(1) as f64);
+        examples.push(Example {
+            source,
+            generated: out,
+            truth: poses[1].clone(),
+        });
+    }
+    let n_gen = shapes * per_source;
+    let generated = InMemorySignals::new(generated_all, n_gen, rest.num_vertices(), 3)?;
+    let metric = MassWeighted::new(&mass, 3)?;
+    let d = metric.pairwise(&generated, &meshes)?;
+    let median = |v: &[f64]| Quartiles::of(v).median;
+    let spread = |v: &[DeformParams]| ParamSpread::of(v);
+    Ok((
+        SetEvaluation {
+            set: set
+                .file_name()
+                .map_or_else(String::new, |n| n.to_string_lossy().into_owned()),
+            vertices: rest.num_vertices(),
+            sources: shapes,
+            samples_per_source: per_source,
+            projection: Quartiles::of(&projection),
+            projection_floor: Quartiles::of(&floor),
+            displacement_ratio: median(&moved) / median(&data_moved).max(f64::MIN_POSITIVE),
+            pose_spread: spread(&gen_params),
+            reference_pose_spread: spread(&ref_params),
+            mmd: mmd(&d)?,
+            cov: coverage(&d)?,
+            predictor_error: Quartiles::of(&predictor_error),
+            seconds_per_sample: seconds / n_gen.max(1) as f64,
+        },
+        examples,
+    ))
+}
