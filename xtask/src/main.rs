@@ -29,6 +29,7 @@ mod bench_net;
 mod bench_noise;
 mod demo;
 mod figures;
+mod figures_arbitrary;
 mod figures_deform;
 mod figures_gmm;
 mod flow_steps;
@@ -101,6 +102,11 @@ enum FiguresCmd {
     /// mesh, noise ablation table, generalization, generation across
     /// resolutions, robustness to holes, partial meshes and edge flips.
     Deform(figures_deform::DeformArgs),
+    /// The paper's arbitrary-source model at CPU scale: body shapes x
+    /// poses of a humanoid, the eigenvector predictor and the conditioned
+    /// flow, evaluated on unseen shapes of the template and of another
+    /// triangulation (and on another object).
+    Arbitrary(figures_arbitrary::ArbitraryArgs),
 }
 
 #[derive(Subcommand)]
@@ -313,6 +319,10 @@ fn main() -> Result<()> {
         Cmd::ReproduceFigures(FiguresCmd::Deform(args)) => {
             let env = pyenv::ensure()?;
             figures_deform::deform(&env, &args)
+        }
+        Cmd::ReproduceFigures(FiguresCmd::Arbitrary(args)) => {
+            let env = pyenv::ensure()?;
+            figures_arbitrary::arbitrary(&env, &args)
         }
         Cmd::Mfm { args } => {
             let env = pyenv::ensure()?;

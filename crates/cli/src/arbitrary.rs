@@ -321,7 +321,7 @@ pub fn eval(a: EvalArgs) -> Result<()> {
         println!(
             "{set:>9} ({} vertices, {} sources x {}): projection {:.2e} [{:.2e}, {:.2e}] (floor {:.2e}), \
              displacement ratio {:.2}, pose spread {:.2}/{:.2} of the data's, MMD {:.4}, COV {:.2}, \
-             predictor error {:.3}",
+             predictor error {:.3} (vectors 1-8: {:.3})",
             r.vertices,
             r.sources,
             r.samples_per_source,
@@ -334,7 +334,8 @@ pub fn eval(a: EvalArgs) -> Result<()> {
             r.pose_spread.translation / r.reference_pose_spread.translation.max(f64::MIN_POSITIVE),
             r.mmd,
             r.cov,
-            r.predictor_error.median
+            r.predictor_error.median,
+            r.predictor_error_low.median
         );
         let rows = examples.len().min(4);
         let cols = 2 + a.per_source.min(3);

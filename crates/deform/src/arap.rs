@@ -883,9 +883,6 @@ fn greedy_coloring(n: usize, ring_ptr: &[usize], ring: &[u32]) -> Vec<Vec<u32>> 
     classes
 }
 
-/// Every free vertex must reach a constrained one through edges with a
-/// non-zero weight, or `L_FF` is singular.
-
 /// The cotangent Laplacian with every negative edge weight set to 0 (its
 /// diagonal re-summed), or `l` itself, untouched, when no weight is
 /// negative. With a negative weight (an edge opposite two angles summing
@@ -960,6 +957,8 @@ fn check_regions(n: usize, handles: &HandleSet, regions: &[Vec<usize>]) -> Resul
     Ok(())
 }
 
+/// Every free vertex must reach a constrained one through edges with a
+/// non-zero weight, or `L_FF` is singular.
 fn check_connected(
     n: usize,
     handle_of: &[u32],

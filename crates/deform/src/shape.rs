@@ -153,8 +153,7 @@ impl ShapeFamily {
             return bad("center", "finite coordinates", format!("{:?}", self.center));
         }
         for r in &self.regions {
-            if !(r.radius.is_finite() && r.radius > 0.0) || !r.center.iter().all(|x| x.is_finite())
-            {
+            if !(r.radius.is_finite() && r.radius > 0.0 && r.center.iter().all(|x| x.is_finite())) {
                 return bad(
                     "shape region",
                     "a finite centre and a finite radius > 0",

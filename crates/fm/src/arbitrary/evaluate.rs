@@ -24,7 +24,8 @@
 //!   weights of the set's mesh).
 //! - **predictor error**: per source, the mean over vectors `1..k` of the
 //!   mass-weighted relative error of the predicted eigenvectors against the
-//!   basis of the set's rest mesh ([`relative_errors`]).
+//!   basis of the set's rest mesh ([`relative_errors`]), and over vectors
+//!   `1..=8` alone.
 
 use std::path::Path;
 use std::time::Instant;
@@ -68,8 +69,11 @@ pub struct SetEvaluation {
     pub mmd: f64,
     /// Coverage of the set's meshes.
     pub cov: f64,
-    /// The predictor's mean relative error per source.
+    /// The predictor's mean relative error per source (vectors `1..k`).
     pub predictor_error: Quartiles,
+    /// The same over the first eight non-constant vectors (`1..=8`), the
+    /// coarse layout of the body.
+    pub predictor_error_low: Quartiles,
     /// Seconds per generated target.
     pub seconds_per_sample: f64,
 }
@@ -129,7 +133,8 @@ pub fn evaluate_set(
     let k = sampler.predictor().eigenvectors();
     let basis = Eigenbasis::of(&rest, k)?;
     let (mut projection, mut floor, mut moved, mut data_moved) = (vec![], vec![], vec![], vec![]);
-    let (mut gen_params, mut ref_params, mut predictor_error) = (vec![], vec![], vec![]);
+    let (mut gen_params, mut ref_params) = (vec![], vec![]);
+    let (mut predictor_error, mut predictor_error_low) = (vec![], vec![]);
     let mut generated_all: Vec<f32> = Vec::new();
     let mut examples = Vec::new();
     let mut seconds = 0.0;
@@ -162,7 +167,9 @@ pub fn evaluate_set(
         }
         let predicted = sampler.eigenvectors_on(&source)?;
         let errors = relative_errors(&rest, &basis, &predicted)?;
-        predictor_error.push(errors[1..].iter().sum::<f64>() / (k - 1).max(1) as f64);
+        let mean = |e: &[f64]| e.iter().sum::<f64>() / e.len().max(1) as f64;
+        predictor_error.push(mean(&errors[1..]));
+        predictor_error_low.push(mean(&errors[1..k.min(9)]));
         examples.push(Example {
             source,
             generated: out,
@@ -191,6 +198,7 @@ pub fn evaluate_set(
             mmd: mmd(&d)?,
             cov: coverage(&d)?,
             predictor_error: Quartiles::of(&predictor_error),
+            predictor_error_low: Quartiles::of(&predictor_error_low),
             seconds_per_sample: seconds / n_gen.max(1) as f64,
         },
         examples,

@@ -6,9 +6,9 @@
 //! Training pairs come from a pairs dataset ([`mfm_data::pairs`]). Per
 //! pair: both shapes go into the source's frame (and augmentation); the
 //! target `x1` and the noise `x0 = sigma * (Matérn noise on the source)`
-//! lose their mass-weighted means (the source's masses); `x_t = (1 - t) x0
-//! + t x1`; the loss is the flow-matching loss against `x1 - x0` (vertex
-//! and Jacobian terms). Sampling integrates the velocity from noise on the
+//! lose their mass-weighted means (the source's masses);
+//! `x_t = (1 - t) x0 + t x1`; the loss is the flow-matching loss against
+//! `x1 - x0` (vertex and Jacobian terms). Sampling integrates the velocity from noise on the
 //! source with the midpoint rule, adds the source's mass-weighted centroid
 //! and maps back to the source's units.
 //!
