@@ -910,3 +910,167 @@ fn deformation_dataset_trains_on_coarse_and_samples_on_finer_meshes() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("small-holes"), "{}", stderr(&o));
 }
+
+#[cfg(feature = "network")]
+#[test]
+fn pairs_dataset_predictor_and_arbitrary_source_flow_end_to_end() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |s: &str| dir.path().join(s).to_string_lossy().into_owned();
+    let pairs = |extra: &[&str]| {
+        let mut a = vec!["dataset", "pairs", "--mesh", "builtin:capsule", "--out"];
+        a.extend_from_slice(extra);
+        mfm(&a)
+    };
+    // a pair needs two poses of one shape; nothing is written
+    let o = pairs(&[&p("bad"), "--poses", "1"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--poses"), "{}", stderr(&o));
+    assert!(!dir.path().join("bad").exists());
+    let o = pairs(&[
+        &p("data"),
+        "--shapes",
+        "2",
+        "--poses",
+        "2",
+        "--reference",
+        "1",
+        "--handles",
+        "2",
+        "--radius",
+        "0.15",
+        "--regions",
+        "3",
+        "--coarse-faces",
+        "300",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "train/signals.npy",
+        "train/params.json",
+        "holdout/signals.npy",
+        "reference/signals.npy",
+        "pair_space.json",
+        "eval.ply",
+        "preview.png",
+    ] {
+        assert!(dir.path().join("data").join(f).is_file(), "{f} missing");
+    }
+    let (shape, _) = read_npy_f32(&dir.path().join("data/train/signals.npy"));
+    assert_eq!((shape[0], shape[2]), (4, 3));
+    // the flow mode's options are refused in the other modes, and back
+    let o = mfm(&[
+        "train",
+        "--mode",
+        "predictor",
+        "--noise",
+        "white",
+        "--dataset",
+        &p("data/train"),
+        "--out",
+        &p("x"),
+    ]);
+    assert!(stderr(&o).contains("--mode flow"), "{}", stderr(&o));
+    let o = mfm(&[
+        "train",
+        "--mode",
+        "predictor",
+        "--dataset",
+        &p("data/train"),
+        "--out",
+        &p("pred"),
+        "--steps",
+        "2",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(dir.path().join("pred/model.safetensors").is_file());
+    let o = mfm(&[
+        "train",
+        "--mode",
+        "arbitrary",
+        "--dataset",
+        &p("data/train"),
+        "--predictor",
+        &p("pred"),
+        "--out",
+        &p("arb"),
+        "--steps",
+        "2",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // a finished run resumes to nothing new
+    let o = mfm(&[
+        "train",
+        "--mode",
+        "arbitrary",
+        "--resume",
+        "--out",
+        &p("arb"),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("steps 2..2 of 2"));
+    // a source of another triangulation than the template's
+    let o = mfm(&[
+        "sample",
+        "--run",
+        &p("arb"),
+        "--source",
+        &p("data/eval.ply"),
+        "--n",
+        "2",
+        "--ply",
+        "1",
+        "--out",
+        &p("targets"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (shape, values) = read_npy_f32(&dir.path().join("targets/samples.npy"));
+    let eval_vertices = shape[1];
+    assert_eq!((shape[0], shape[2]), (2, 3));
+    assert!(values.iter().all(|x| x.is_finite()));
+    for f in [
+        "source.ply",
+        "sample_000.ply",
+        "samples.png",
+        "eigenvectors.png",
+    ] {
+        assert!(dir.path().join("targets").join(f).is_file(), "{f} missing");
+    }
+    let o = mfm(&[
+        "eval-arbitrary",
+        "--run",
+        &p("arb"),
+        "--experiment",
+        &p("data"),
+        "--sources",
+        "1",
+        "--per-source",
+        "1",
+        "--out",
+        &p("eval"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("eval/report.json")).unwrap(),
+    )
+    .unwrap();
+    let sets = report.as_array().unwrap();
+    assert_eq!(sets.len(), 2);
+    assert_eq!(sets[1]["vertices"].as_u64(), Some(eval_vertices));
+    // the data's own shapes are in their space: the floor is round-off
+    assert!(sets[0]["projection_floor"]["median"].as_f64().unwrap() < 1e-10);
+    assert!(dir.path().join("eval/reference.png").is_file());
+    // a one-mesh run is sampled with --mesh, not --source
+    let o = mfm(&[
+        "sample",
+        "--run",
+        &p("pred"),
+        "--source",
+        &p("data/eval.ply"),
+        "--out",
+        &p("y"),
+    ]);
+    assert!(!o.status.success());
+}
