@@ -169,6 +169,17 @@ pub fn is_arbitrary_run(run: &Path) -> bool {
     run.join(ARBITRARY_SPEC).is_file()
 }
 
+/// The options of `mfm sample` an arbitrary-source run reads.
+pub struct ArbitrarySample<'a> {
+    pub run: &'a Path,
+    pub source: &'a str,
+    pub n: usize,
+    pub steps: Option<usize>,
+    pub seed: u64,
+    pub out: &'a Path,
+    pub ply: usize,
+}
+
 /// What `mfm sample` writes for an arbitrary-source run.
 const FILES: [&str; 4] = [
     "samples.npy",
@@ -181,9 +192,16 @@ const FILES: [&str; 4] = [
 /// the source, as samples.npy `[N, V, 3]` f32, source.ply, the first `ply`
 /// as sample_NNN.ply, samples.png (the source beside its targets) and
 /// eigenvectors.png (the predictor's first vectors on the source).
-pub fn sample(run: &Path, source: &str, n: usize, seed: u64, out: &Path, ply: usize) -> Result<()> {
+pub fn sample(a: &ArbitrarySample<'_>) -> Result<()> {
+    let (run, source, n, seed, out, ply) = (a.run, a.source, a.n, a.seed, a.out, a.ply);
     let mesh = load_mesh_checked(source)?;
-    let sampler = ArbitrarySampler::load(run)?;
+    let mut sampler = ArbitrarySampler::load(run)?;
+    if let Some(s) = a.steps {
+        if s == 0 {
+            bail!("--steps must be at least 1");
+        }
+        sampler.set_ode_steps(s);
+    }
     let plys = ply.min(n);
     let mut outputs: Vec<PathBuf> = FILES.iter().map(|f| out.join(f)).collect();
     outputs.extend((0..plys).map(|i| out.join(mfm_fm::sample::sample_ply_name(i))));

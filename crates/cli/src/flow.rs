@@ -350,12 +350,26 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         );
     }
     if crate::arbitrary::is_arbitrary_run(&a.run) {
+        if a.method.is_some_and(|m| m != OdeMethod::Midpoint) {
+            bail!("an arbitrary-source run integrates with the midpoint rule only");
+        }
+        if a.device == DeviceChoice::Cuda {
+            bail!("an arbitrary-source run samples on the CPU (drop --device cuda)");
+        }
         let source = a
             .source
             .as_deref()
             .or(a.mesh.as_deref())
             .unwrap_or_default();
-        return crate::arbitrary::sample(&a.run, source, a.n, a.seed, &a.out, a.ply);
+        return crate::arbitrary::sample(&crate::arbitrary::ArbitrarySample {
+            run: &a.run,
+            source,
+            n: a.n,
+            steps: a.steps,
+            seed: a.seed,
+            out: &a.out,
+            ply: a.ply,
+        });
     }
     let Some(mesh_arg) = a.mesh.as_deref() else {
         bail!(

@@ -152,3 +152,41 @@ fn the_same_parameters_give_corresponding_shapes_on_a_remeshing() {
         "triangulations differ by {apart}, shapes moved {moved}"
     );
 }
+
+#[test]
+fn an_experiment_writes_its_space_and_both_held_out_sets() {
+    use mfm_data::layout::{self, PairsExperiment};
+    let (m, space) = setup();
+    let dir = tempfile::tempdir().unwrap();
+    let train = PairsExperiment {
+        meshes: &m,
+        space: &space,
+        source: "capsule",
+        train: 2,
+        reference: 1,
+        seed: 4,
+        progress: false,
+    }
+    .write(dir.path())
+    .unwrap();
+    assert_eq!(train.len(), 6);
+    let read = layout::read_pair_space(&dir.path().join(layout::PAIR_SPACE)).unwrap();
+    assert_eq!(read, space);
+    // the held-out shapes are the same parameters on both triangulations
+    let hold = Dataset::open(dir.path().join(layout::HOLDOUT)).unwrap();
+    let refs = Dataset::open(dir.path().join(layout::REFERENCE)).unwrap();
+    assert_eq!(
+        pairs::read_params(&hold).unwrap(),
+        pairs::read_params(&refs).unwrap()
+    );
+    assert_eq!(refs.mesh().num_vertices(), m.eval.num_vertices());
+    assert_ne!(
+        pairs::read_params(&hold).unwrap().shapes[0],
+        pairs::read_params(&train).unwrap().shapes[0]
+    );
+    // a deformation space is not a pair space
+    let other = dir.path().join("space.json");
+    layout::write_space(&other, &space.poses).unwrap();
+    let e = layout::read_pair_space(&other).unwrap_err();
+    assert!(e.to_string().contains("not a pair space"), "{e}");
+}

@@ -351,6 +351,12 @@ impl ArbitrarySampler {
         &self.spec
     }
 
+    /// Samples with `steps` midpoint steps instead of the run's
+    /// `ode_steps` (at least 1).
+    pub fn set_ode_steps(&mut self, steps: usize) {
+        self.spec.config.ode_steps = steps.max(1);
+    }
+
     /// The predictor the flow was trained with.
     pub fn predictor(&self) -> &EigenPredictor {
         &self.predictor
