@@ -69,62 +69,29 @@ pub fn train(a: ArbitraryTrain<'_>, stop: &AtomicBool) -> Result<()> {
     } else {
         ensure_empty(a.out)?;
     }
-    let preset = a.preset.unwrap_or("cpu");
-    let report: TrainReport = match a.mode {
-        TrainMode::Predictor => {
-            let (config, dataset) = if a.resume {
-                let s: predictor::PredictorSpec = stored(&spec_path)?;
-                (s.config, s.dataset)
-            } else {
-                let mut c = PredictorConfig::preset(preset)?;
-                if let Some(s) = a.steps {
-                    c.schedule.steps = s;
+    let fresh_dir = !a.resume && !a.out.exists();
+    let result = run_training(&a, &spec_path, stop);
+    if result.is_err() && !a.resume {
+        // a fresh run that failed before its first checkpoint leaves nothing
+        let has_checkpoint =
+            mfm_fm::checkpoint::list_checkpoints(a.out).is_ok_and(|c| !c.is_empty());
+        if !has_checkpoint {
+            if fresh_dir {
+                let _ = std::fs::remove_dir_all(a.out);
+            } else if let Ok(entries) = std::fs::read_dir(a.out) {
+                // the folder was empty before: what is in it now is ours
+                for e in entries.flatten() {
+                    let p = e.path();
+                    let _ = if p.is_dir() {
+                        std::fs::remove_dir_all(&p)
+                    } else {
+                        std::fs::remove_file(&p)
+                    };
                 }
-                if let Some(s) = a.seed {
-                    c.schedule.seed = s;
-                }
-                (c, absolute(need(a.dataset, "--dataset")?)?)
-            };
-            println!(
-                "eigenvector predictor: {} vectors, width {}, {} blocks, {} steps of {} meshes",
-                config.eigenvectors,
-                config.width,
-                config.blocks,
-                config.schedule.steps,
-                config.schedule.batch
-            );
-            predictor::train(a.out, &dataset, &config, stop, !a.quiet)?
+            }
         }
-        _ => {
-            let (config, dataset, predictor_dir) = if a.resume {
-                let s: flow::ArbitrarySpec = stored(&spec_path)?;
-                (s.config, s.dataset, s.predictor)
-            } else {
-                let mut c = FlowConfig::preset(preset)?;
-                if let Some(s) = a.steps {
-                    c.schedule.steps = s;
-                }
-                if let Some(s) = a.seed {
-                    c.schedule.seed = s;
-                }
-                (
-                    c,
-                    absolute(need(a.dataset, "--dataset")?)?,
-                    absolute(need(a.predictor, "--predictor")?)?,
-                )
-            };
-            println!(
-                "arbitrary-source flow: width {}, {} blocks, noise {} x {}, {} steps of {} pairs",
-                config.width,
-                config.blocks,
-                config.noise,
-                config.sigma,
-                config.schedule.steps,
-                config.schedule.batch
-            );
-            flow::train(a.out, &dataset, &predictor_dir, &config, stop, !a.quiet)?
-        }
-    };
+    }
+    let report = result?;
     for s in &report.skipped_checkpoints {
         eprintln!("warning: passed over a damaged checkpoint: {s}");
     }
@@ -154,6 +121,71 @@ pub fn train(a: ArbitraryTrain<'_>, stop: &AtomicBool) -> Result<()> {
         std::process::exit(130);
     }
     Ok(())
+}
+
+/// Reads or builds the configuration of the mode and trains.
+fn run_training(
+    a: &ArbitraryTrain<'_>,
+    spec_path: &Path,
+    stop: &AtomicBool,
+) -> Result<TrainReport> {
+    let preset = a.preset.unwrap_or("cpu");
+    let report: TrainReport = match a.mode {
+        TrainMode::Predictor => {
+            let (config, dataset) = if a.resume {
+                let s: predictor::PredictorSpec = stored(spec_path)?;
+                (s.config, s.dataset)
+            } else {
+                let mut c = PredictorConfig::preset(preset)?;
+                if let Some(s) = a.steps {
+                    c.schedule.steps = s;
+                }
+                if let Some(s) = a.seed {
+                    c.schedule.seed = s;
+                }
+                (c, absolute(need(a.dataset, "--dataset")?)?)
+            };
+            println!(
+                "eigenvector predictor: {} vectors, width {}, {} blocks, {} steps of {} meshes",
+                config.eigenvectors,
+                config.width,
+                config.blocks,
+                config.schedule.steps,
+                config.schedule.batch
+            );
+            predictor::train(a.out, &dataset, &config, stop, !a.quiet)?
+        }
+        _ => {
+            let (config, dataset, predictor_dir) = if a.resume {
+                let s: flow::ArbitrarySpec = stored(spec_path)?;
+                (s.config, s.dataset, s.predictor)
+            } else {
+                let mut c = FlowConfig::preset(preset)?;
+                if let Some(s) = a.steps {
+                    c.schedule.steps = s;
+                }
+                if let Some(s) = a.seed {
+                    c.schedule.seed = s;
+                }
+                (
+                    c,
+                    absolute(need(a.dataset, "--dataset")?)?,
+                    absolute(need(a.predictor, "--predictor")?)?,
+                )
+            };
+            println!(
+                "arbitrary-source flow: width {}, {} blocks, noise {} x {}, {} steps of {} pairs",
+                config.width,
+                config.blocks,
+                config.noise,
+                config.sigma,
+                config.schedule.steps,
+                config.schedule.batch
+            );
+            flow::train(a.out, &dataset, &predictor_dir, &config, stop, !a.quiet)?
+        }
+    };
+    Ok(report)
 }
 
 fn need<'a>(p: Option<&'a Path>, flag: &str) -> Result<&'a Path> {

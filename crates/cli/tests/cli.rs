@@ -999,6 +999,22 @@ fn pairs_dataset_predictor_and_arbitrary_source_flow_end_to_end() {
         "--quiet",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
+    // a fresh run that fails before its first checkpoint leaves nothing
+    let o = mfm(&[
+        "train",
+        "--mode",
+        "arbitrary",
+        "--dataset",
+        &p("data/train"),
+        "--predictor",
+        &p("nowhere"),
+        "--out",
+        &p("failed"),
+        "--quiet",
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("nowhere"), "{}", stderr(&o));
+    assert!(!dir.path().join("failed").exists());
     // a finished run resumes to nothing new
     let o = mfm(&[
         "train",
