@@ -20,8 +20,9 @@
 //!   much scores above 1.
 //! - **pose spread** ([`ParamSpread`]) of the projections' handle motions,
 //!   beside the set's own: a collapsed model has none.
-//! - **MMD / COV** of the targets against every mesh of the set (mass
-//!   weights of the set's mesh).
+//! - **MMD / COV** of the targets against the other poses of the
+//!   evaluated shapes (every held-out mesh but the sources; mass weights of
+//!   the set's mesh): a model that copies its sources covers nothing.
 //! - **predictor error**: per source, the mean over vectors `1..k` of the
 //!   mass-weighted relative error of the predicted eigenvectors against the
 //!   basis of the set's rest mesh ([`relative_errors`]), and over vectors
@@ -65,9 +66,10 @@ pub struct SetEvaluation {
     pub pose_spread: ParamSpread,
     /// Pose spread of the set's own meshes' projections.
     pub reference_pose_spread: ParamSpread,
-    /// Minimum matching distance to the set's meshes.
+    /// Minimum matching distance to the other poses of the evaluated
+    /// shapes.
     pub mmd: f64,
-    /// Coverage of the set's meshes.
+    /// Coverage of those poses.
     pub cov: f64,
     /// The predictor's mean relative error per source (vectors `1..k`).
     pub predictor_error: Quartiles,
@@ -136,6 +138,7 @@ pub fn evaluate_set(
     let (mut gen_params, mut ref_params) = (vec![], vec![]);
     let (mut predictor_error, mut predictor_error_low) = (vec![], vec![]);
     let mut generated_all: Vec<f32> = Vec::new();
+    let mut others: Vec<f32> = Vec::new();
     let mut examples = Vec::new();
     let mut seconds = 0.0;
     for s in 0..shapes {
@@ -151,6 +154,7 @@ pub fn evaluate_set(
         }
         for q in &poses[1..] {
             data_moved.push(rms(q, &poses[0], &mass));
+            others.extend(q.iter().flat_map(|x| x.map(|y| y as f32)));
         }
         let source = rest
             .with_positions(poses[0].clone())
@@ -179,7 +183,8 @@ pub fn evaluate_set(
     let n_gen = shapes * per_source;
     let generated = InMemorySignals::new(generated_all, n_gen, rest.num_vertices(), 3)?;
     let metric = MassWeighted::new(&mass, 3)?;
-    let d = metric.pairwise(&generated, &meshes)?;
+    let reference = InMemorySignals::new(others, shapes * (p - 1), rest.num_vertices(), 3)?;
+    let d = metric.pairwise(&generated, &reference)?;
     let median = |v: &[f64]| Quartiles::of(v).median;
     let spread = |v: &[DeformParams]| ParamSpread::of(v);
     Ok((
