@@ -33,6 +33,7 @@ pub struct ArbitraryTrain<'a> {
     pub preset: Option<&'a str>,
     pub dataset: Option<&'a Path>,
     pub predictor: Option<&'a Path>,
+    pub eigenvectors: bool,
     pub out: &'a Path,
     pub steps: Option<u64>,
     pub seed: Option<u64>,
@@ -55,9 +56,9 @@ pub fn train(a: ArbitraryTrain<'_>, stop: &AtomicBool) -> Result<()> {
     };
     let spec_path = a.out.join(spec_file);
     if a.resume {
-        if a.preset.is_some() || a.seed.is_some() || a.steps.is_some() {
+        if a.preset.is_some() || a.seed.is_some() || a.steps.is_some() || !a.eigenvectors {
             bail!(
-                "--resume continues with the run's own {spec_file}; drop --preset/--seed/--steps"
+                "--resume continues with the run's own {spec_file}; drop --preset/--seed/--steps/--no-eigenvectors"
             );
         }
         if !spec_path.is_file() {
@@ -131,6 +132,9 @@ fn run_training(
 ) -> Result<TrainReport> {
     let preset = a.preset.unwrap_or("cpu");
     let report: TrainReport = match a.mode {
+        TrainMode::Predictor if !a.eigenvectors => {
+            bail!("--no-eigenvectors is an option of --mode arbitrary")
+        }
         TrainMode::Predictor => {
             let (config, dataset) = if a.resume {
                 let s: predictor::PredictorSpec = stored(spec_path)?;
@@ -161,6 +165,7 @@ fn run_training(
                 (s.config, s.dataset, s.predictor)
             } else {
                 let mut c = FlowConfig::preset(preset)?;
+                c.eigenvectors = a.eigenvectors;
                 if let Some(s) = a.steps {
                     c.schedule.steps = s;
                 }

@@ -46,6 +46,10 @@ pub struct TrainArgs {
     /// (--mode arbitrary).
     #[arg(long)]
     predictor: Option<PathBuf>,
+    /// --mode arbitrary without the predicted eigenvectors (zeros in their
+    /// conditioning channels): an ablation of the positional encoding.
+    #[arg(long)]
+    no_eigenvectors: bool,
     /// Dataset folder (overrides the configuration's dataset.path).
     #[arg(long)]
     dataset: Option<PathBuf>,
@@ -150,6 +154,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
                 preset: a.preset.as_deref(),
                 dataset: a.dataset.as_deref(),
                 predictor: a.predictor.as_deref(),
+                eigenvectors: !a.no_eigenvectors,
                 out: &a.out,
                 steps: a.steps,
                 seed: a.seed,
@@ -159,8 +164,8 @@ pub fn train(a: TrainArgs) -> Result<()> {
             &stop,
         );
     }
-    if a.predictor.is_some() {
-        bail!("--predictor is an option of --mode arbitrary");
+    if a.predictor.is_some() || a.no_eigenvectors {
+        bail!("--predictor and --no-eigenvectors are options of --mode arbitrary");
     }
     // A fresh run that fails before its first checkpoint leaves nothing.
     let mut fresh: Option<mfm_files::Undo> = None;

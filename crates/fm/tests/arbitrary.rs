@@ -127,6 +127,24 @@ fn trains_and_samples_on_unseen_sources_of_any_triangulation() {
     assert!(report.finished);
     assert!(report.last_loss.unwrap().is_finite());
     let sampler = ArbitrarySampler::load(&f_dir).unwrap();
+    // the ablation without the positional encoding trains and samples too,
+    // and gives other targets from the same noise
+    let mut plain = tiny_flow();
+    plain.eigenvectors = false;
+    let n_dir = dir.path().join("plain");
+    flow::train(&n_dir, train.dir(), &p_dir, &plain, &stop, false).unwrap();
+    let ablated = ArbitrarySampler::load(&n_dir).unwrap();
+    assert!(!ablated.spec().config.eigenvectors);
+    let probe = train
+        .mesh()
+        .with_positions(train.load_all().unwrap().positions(0))
+        .unwrap();
+    let (a, b) = (
+        ablated.sample(&probe, 0, 1, 7).unwrap(),
+        sampler.sample(&probe, 0, 1, 7).unwrap(),
+    );
+    assert!(a[0].iter().flatten().all(|x| x.is_finite()));
+    assert_ne!(a, b);
 
     // unseen shapes: the same connectivity, and another triangulation
     let held = write(&t, &dir.path().join("held"), &t.meshes.coarse, 99, 1);

@@ -64,8 +64,17 @@ pub struct FlowConfig {
     pub sigma: f64,
     /// Midpoint steps of the sampler.
     pub ode_steps: usize,
+    /// Condition on the predicted eigenvectors (the official model). With
+    /// `false` their channels are zeros: the same network without the
+    /// positional encoding, for ablations.
+    #[serde(default = "yes")]
+    pub eigenvectors: bool,
     /// Optimization.
     pub schedule: Schedule,
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// Preset names of [`FlowConfig::preset`].
@@ -83,6 +92,7 @@ impl FlowConfig {
             noise: NoiseKind::Matern { tau: 100.0 },
             sigma: 5.0,
             ode_steps: 20,
+            eigenvectors: true,
             schedule: Schedule {
                 lr: 5e-4,
                 batch: 32,
@@ -268,6 +278,9 @@ pub fn train(
             };
             let x_src = positions_tensor(&src, device);
             let eigen = match (schedule.augment, eigen_cache.get(&si)) {
+                _ if !config.eigenvectors => {
+                    Tensor::zeros([1, x_src.size()[1], k as i64], (Kind::Float, device))
+                }
                 (false, Some(e)) => e.shallow_clone(),
                 _ => {
                     let e = predictor.predict_tensor(&ctx.tensors, &x_src)?;
@@ -387,7 +400,12 @@ impl ArbitrarySampler {
             .map_err(|e| FmError::Config(e.to_string()))?;
         let ctx = MeshContext::new(&moved, self.spec.config.noise)?;
         let x_src = positions_tensor(&positions, Device::Cpu);
-        let eigen = self.predictor.predict_tensor(&ctx.tensors, &x_src)?;
+        let eigen = if self.spec.config.eigenvectors {
+            self.predictor.predict_tensor(&ctx.tensors, &x_src)?
+        } else {
+            let k = self.predictor.eigenvectors() as i64;
+            Tensor::zeros([1, x_src.size()[1], k], (Kind::Float, Device::Cpu))
+        };
         let centroid = ctx.tensors.mass_weighted_mean(&x_src)?;
         let v = source.num_vertices() as i64;
         let steps = self.spec.config.ode_steps.max(1);
