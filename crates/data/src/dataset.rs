@@ -363,6 +363,28 @@ impl Dataset {
         &self.mesh
     }
 
+    /// The manifest's `generator_params` as `T` when `generator` made the
+    /// dataset (`None` for another generator).
+    ///
+    /// # Errors
+    /// [`DataError::Format`] naming the manifest when they do not parse.
+    pub fn generator_params<T: serde::de::DeserializeOwned>(
+        &self,
+        generator: &str,
+    ) -> Result<Option<T>> {
+        if self.manifest.generator != generator {
+            return Ok(None);
+        }
+        serde_json::from_value(self.manifest.generator_params.clone())
+            .map(Some)
+            .map_err(|e| {
+                DataError::format(
+                    self.dir.join("manifest.json"),
+                    format!("generator_params of a {generator} dataset: {e}"),
+                )
+            })
+    }
+
     /// The manifest.
     pub fn manifest(&self) -> &Manifest {
         &self.manifest

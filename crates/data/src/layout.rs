@@ -254,7 +254,12 @@ impl DeformExperiment<'_> {
 /// # Errors
 /// [`DataError::Io`] naming the file.
 pub fn write_space(path: &Path, space: &DeformSpace) -> Result<()> {
-    mfm_files::write_json(path, space).map_err(|e| match e {
+    write_pretty(path, space)
+}
+
+/// Pretty JSON at `path`, atomically, with this crate's errors.
+fn write_pretty(path: &Path, value: &impl serde::Serialize) -> Result<()> {
+    mfm_files::write_json(path, value).map_err(|e| match e {
         mfm_files::FileError::Io { source, .. } => DataError::io(path, source),
         other => DataError::format(path, other.to_string()),
     })
@@ -333,11 +338,7 @@ impl PairsExperiment<'_> {
         for (file, mesh) in DEFORM_MESHES.iter().zip([&m.original, &m.coarse, &m.eval]) {
             mfm_meshio::write_ply(out.join(file), mesh, &[])?;
         }
-        let path = out.join(PAIR_SPACE);
-        mfm_files::write_json(&path, self.space).map_err(|e| match e {
-            mfm_files::FileError::Io { source, .. } => DataError::io(&path, source),
-            other => DataError::format(&path, other.to_string()),
-        })?;
+        write_pretty(&out.join(PAIR_SPACE), self.space)?;
         let set =
             |dir: &str, mesh: &TriMesh, seed: u64, range: Range<usize>, role: &str, what: &str| {
                 pairs::write_dataset(

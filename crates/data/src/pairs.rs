@@ -96,18 +96,7 @@ impl PairsManifest {
     /// [`DataError::Format`] naming the manifest when `generator_params` do
     /// not parse.
     pub fn of(dataset: &Dataset) -> Result<Option<Self>> {
-        let m = dataset.manifest();
-        if m.generator != GENERATOR {
-            return Ok(None);
-        }
-        serde_json::from_value(m.generator_params.clone())
-            .map(Some)
-            .map_err(|e| {
-                DataError::format(
-                    dataset.dir().join("manifest.json"),
-                    format!("generator_params of a pairs dataset: {e}"),
-                )
-            })
+        dataset.generator_params(GENERATOR)
     }
 }
 

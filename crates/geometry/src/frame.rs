@@ -70,7 +70,17 @@ impl CanonicalFrame {
     /// [`MeshError::ZeroSize`] when the mesh is a single point (every
     /// extent zero).
     pub fn of(mesh: &TriMesh) -> Result<Self, MeshError> {
-        let (lo, hi) = mesh.bounding_box();
+        Self::of_points(mesh.positions())
+    }
+
+    /// The frame of a point set (a shape's positions before it is a mesh):
+    /// as [`CanonicalFrame::of`]. `O(n)`.
+    ///
+    /// # Errors
+    /// [`MeshError::ZeroSize`] when every extent is zero (or there are no
+    /// points).
+    pub fn of_points(points: &[[f64; 3]]) -> Result<Self, MeshError> {
+        let (lo, hi) = crate::mesh::bounding_box(points);
         let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0f64, f64::max);
         if !(extent.is_finite() && extent > 0.0) {
             return Err(MeshError::ZeroSize { extent });

@@ -201,15 +201,7 @@ impl TriMesh {
 
     /// Axis-aligned bounding box `(min, max)`.
     pub fn bounding_box(&self) -> ([f64; 3], [f64; 3]) {
-        let mut lo = [f64::INFINITY; 3];
-        let mut hi = [f64::NEG_INFINITY; 3];
-        for p in &self.positions {
-            for k in 0..3 {
-                lo[k] = lo[k].min(p[k]);
-                hi[k] = hi[k].max(p[k]);
-            }
-        }
-        (lo, hi)
+        bounding_box(&self.positions)
     }
 
     /// Length of the bounding box diagonal.
@@ -217,6 +209,20 @@ impl TriMesh {
         let (lo, hi) = self.bounding_box();
         norm(sub(hi, lo))
     }
+}
+
+/// The axis-aligned bounding box `(min, max)` of `points` (infinities for
+/// none). `O(n)`.
+pub fn bounding_box(points: &[[f64; 3]]) -> ([f64; 3], [f64; 3]) {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in points {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (lo, hi)
 }
 
 /// `a - b`.

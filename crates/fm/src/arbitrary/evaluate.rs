@@ -92,15 +92,8 @@ pub struct Example {
     pub truth: Vec<[f64; 3]>,
 }
 
-fn rms(a: &[[f64; 3]], b: &[[f64; 3]], mass: &[f64]) -> f64 {
-    let total: f64 = mass.iter().sum();
-    let s: f64 = a
-        .iter()
-        .zip(b)
-        .zip(mass)
-        .map(|((p, q), m)| m * (0..3).map(|k| (p[k] - q[k]).powi(2)).sum::<f64>())
-        .sum();
-    (s / total).sqrt()
+fn flat(p: &[[f64; 3]]) -> Vec<f32> {
+    p.iter().flat_map(|x| x.map(|y| y as f32)).collect()
 }
 
 /// Evaluates `sampler` on the held-out pairs dataset `set` (see the
@@ -132,6 +125,7 @@ pub fn evaluate_set(
     let meshes = data.load_all()?;
     let shapes = (meshes.len() / p).min(sources.max(1));
     let mass = mfm_geometry::operators::lumped_mass(&rest);
+    let metric = MassWeighted::new(&mass, 3)?;
     let k = sampler.predictor().eigenvectors();
     let basis = Eigenbasis::of(&rest, k)?;
     let (mut projection, mut floor, mut moved, mut data_moved) = (vec![], vec![], vec![], vec![]);
@@ -152,9 +146,11 @@ pub fn evaluate_set(
             floor.push(pr.mse);
             ref_params.push(pr.params);
         }
+        let source_values = flat(&poses[0]);
         for q in &poses[1..] {
-            data_moved.push(rms(q, &poses[0], &mass));
-            others.extend(q.iter().flat_map(|x| x.map(|y| y as f32)));
+            let q = flat(q);
+            data_moved.push(metric.distance(&q, &source_values)?);
+            others.extend(q);
         }
         let source = rest
             .with_positions(poses[0].clone())
@@ -166,8 +162,9 @@ pub fn evaluate_set(
             let pr = project(&arap, &posing, g)?;
             projection.push(pr.mse);
             gen_params.push(pr.params);
-            moved.push(rms(g, &poses[0], &mass));
-            generated_all.extend(g.iter().flat_map(|x| x.map(|y| y as f32)));
+            let g = flat(g);
+            moved.push(metric.distance(&g, &source_values)?);
+            generated_all.extend(g);
         }
         let predicted = sampler.eigenvectors_on(&source)?;
         let errors = relative_errors(&rest, &basis, &predicted)?;
@@ -182,7 +179,6 @@ pub fn evaluate_set(
     }
     let n_gen = shapes * per_source;
     let generated = InMemorySignals::new(generated_all, n_gen, rest.num_vertices(), 3)?;
-    let metric = MassWeighted::new(&mass, 3)?;
     let reference = InMemorySignals::new(others, shapes * (p - 1), rest.num_vertices(), 3)?;
     let d = metric.pairwise(&generated, &reference)?;
     let median = |v: &[f64]| Quartiles::of(v).median;

@@ -34,7 +34,7 @@ use tch::{Device, Kind, Tensor};
 use super::predictor::{EigenPredictor, PredictorSpec, positions_tensor, prepared};
 use super::run::{Optimization, TrainReport};
 use super::sources::SourceSet;
-use super::{Schedule, to_own_frame};
+use super::{Schedule, finished_weights, read_json, same_config, to_own_frame};
 use crate::checkpoint::{NET_CONFIG_FILE, WEIGHTS_FILE};
 use crate::context::MeshContext;
 use crate::error::{FmError, Result};
@@ -166,11 +166,6 @@ pub struct ArbitrarySpec {
     pub vertices: usize,
 }
 
-fn read_json<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
-    serde_json::from_str(&text).map_err(|e| FmError::format(path, format!("{what}: {e}")))
-}
-
 /// The conditioning `[1, V, 3 + 1 + k]` of a source at time `t`.
 fn conditioning(source: &Tensor, t: f64, eigen: &Tensor) -> Tensor {
     let v = source.size()[1];
@@ -207,13 +202,7 @@ pub fn train(
     let spec_path = run_dir.join(ARBITRARY_SPEC);
     if spec_path.is_file() {
         let spec: ArbitrarySpec = read_json(&spec_path, "an arbitrary-source run's description")?;
-        if &spec.config != config {
-            return Err(FmError::Config(format!(
-                "{} was started with another configuration; resume it with the stored one \
-                 or train into a new folder",
-                run_dir.display()
-            )));
-        }
+        same_config(run_dir, &spec.config, config)?;
     } else {
         let source = EigenPredictor::load(predictor_dir)?;
         if source.spec().vertices != template.num_vertices() {
@@ -339,13 +328,7 @@ impl ArbitrarySampler {
             &run_dir.join(ARBITRARY_SPEC),
             "an arbitrary-source run's description",
         )?;
-        let weights = run_dir.join(WEIGHTS_FILE);
-        if !weights.is_file() {
-            return Err(FmError::Config(format!(
-                "{} has no finished model ({WEIGHTS_FILE}); train it to the end first",
-                run_dir.display()
-            )));
-        }
+        let weights = finished_weights(run_dir, "model")?;
         let predictor = load_copied_predictor(run_dir)?;
         let mut net = PoissonNet::new(
             &spec.config.net_config(predictor.eigenvectors()),

@@ -37,8 +37,11 @@ pub mod predictor;
 mod run;
 pub mod sources;
 
+use std::path::{Path, PathBuf};
+
 use serde::{Deserialize, Serialize};
 
+use crate::checkpoint::WEIGHTS_FILE;
 use crate::error::{FmError, Result};
 
 pub use run::TrainReport;
@@ -120,22 +123,9 @@ pub fn to_own_frame(
     positions: &mut [[f64; 3]],
     also: Option<&mut [[f64; 3]]>,
 ) -> Result<mfm_geometry::frame::CanonicalFrame> {
-    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for p in positions.iter() {
-        for a in 0..3 {
-            lo[a] = lo[a].min(p[a]);
-            hi[a] = hi[a].max(p[a]);
-        }
-    }
-    let extent = (0..3).map(|a| hi[a] - lo[a]).fold(0.0, f64::max);
-    if !(extent.is_finite() && extent > 0.0) {
-        return Err(FmError::Config(format!(
-            "a source mesh has a degenerate bounding box (largest extent {extent})"
-        )));
-    }
-    let scale = 1.0 / extent;
-    let shift: [f64; 3] = std::array::from_fn(|a| -0.5 * (lo[a] + hi[a]) * scale);
-    let frame = mfm_geometry::frame::CanonicalFrame { scale, shift };
+    let frame = mfm_geometry::frame::CanonicalFrame::of_points(positions).map_err(|e| {
+        FmError::Config(format!("a source mesh has a degenerate bounding box: {e}"))
+    })?;
     for p in positions.iter_mut() {
         *p = frame.to_canonical(*p);
     }
@@ -145,4 +135,36 @@ pub fn to_own_frame(
         }
     }
     Ok(frame)
+}
+
+/// Reads a run folder's JSON description; `what` names it in the error.
+pub(crate) fn read_json<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
+    let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
+    serde_json::from_str(&text).map_err(|e| FmError::format(path, format!("{what}: {e}")))
+}
+
+/// The error for resuming `run_dir` with a configuration other than its
+/// stored one, `Ok` when they are equal.
+pub(crate) fn same_config<T: PartialEq>(run_dir: &Path, stored: &T, given: &T) -> Result<()> {
+    if stored == given {
+        return Ok(());
+    }
+    Err(FmError::Config(format!(
+        "{} was started with another configuration; resume it with the stored one \
+         or train into a new folder",
+        run_dir.display()
+    )))
+}
+
+/// The final weights of a finished run in `run_dir` (`what`: the kind of
+/// model, for the error).
+pub(crate) fn finished_weights(run_dir: &Path, what: &str) -> Result<PathBuf> {
+    let weights = run_dir.join(WEIGHTS_FILE);
+    if !weights.is_file() {
+        return Err(FmError::Config(format!(
+            "{} has no finished {what} ({WEIGHTS_FILE}); train it to the end first",
+            run_dir.display()
+        )));
+    }
+    Ok(weights)
 }

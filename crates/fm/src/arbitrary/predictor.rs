@@ -25,8 +25,9 @@ use tch::{Device, Kind, Tensor};
 
 use super::run::{Optimization, TrainReport};
 use super::sources::SourceSet;
-use super::{AUGMENT_SCALE, AUGMENT_SHIFT, Schedule, to_own_frame};
-use crate::checkpoint::WEIGHTS_FILE;
+use super::{
+    AUGMENT_SCALE, AUGMENT_SHIFT, Schedule, finished_weights, read_json, same_config, to_own_frame,
+};
 use crate::error::{FmError, Result};
 use crate::train::derived_rng;
 
@@ -136,11 +137,6 @@ pub struct PredictorSpec {
     pub margins: Vec<f64>,
 }
 
-fn read_json<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
-    serde_json::from_str(&text).map_err(|e| FmError::format(path, format!("{what}: {e}")))
-}
-
 /// A source moved into its own frame (and the same map applied to
 /// `also`), then scaled and shifted by the step's augmentation.
 pub(crate) fn prepared(
@@ -213,13 +209,7 @@ pub fn train(
     let targets_path = run_dir.join(TARGETS_FILE);
     let targets: Vec<f64> = if spec_path.is_file() {
         let spec: PredictorSpec = read_json(&spec_path, "a predictor run's description")?;
-        if &spec.config != config {
-            return Err(FmError::Config(format!(
-                "{} was started with another configuration; resume it with the stored one \
-                 or train into a new folder",
-                run_dir.display()
-            )));
-        }
+        same_config(run_dir, &spec.config, config)?;
         let t = mfm_files::npy::read::<f64>(&targets_path)?;
         if t.shape != [template.num_vertices(), config.eigenvectors] {
             return Err(FmError::format(
@@ -299,13 +289,7 @@ impl EigenPredictor {
             &run_dir.join(PREDICTOR_SPEC),
             "a predictor run's description",
         )?;
-        let weights = run_dir.join(WEIGHTS_FILE);
-        if !weights.is_file() {
-            return Err(FmError::Config(format!(
-                "{} has no finished predictor ({WEIGHTS_FILE}); train it to the end first",
-                run_dir.display()
-            )));
-        }
+        let weights = finished_weights(run_dir, "predictor")?;
         Self::from_files(&weights, spec)
     }
 
