@@ -3,12 +3,12 @@
 //! `libtorch_cuda.so` linked. The folder comes from the net crate's build
 //! script (`DEP_MFM_NET_LIBTORCH_LIB`); see `crates/net/build.rs`.
 
-#[path = "../net/libtorch_link.rs"]
+#[path = "../kernels/libtorch_link.rs"]
 mod libtorch_link;
 
 fn main() {
     println!("cargo:rerun-if-env-changed=DEP_MFM_NET_LIBTORCH_LIB");
-    println!("cargo:rerun-if-changed=../net/libtorch_link.rs");
+    println!("cargo:rerun-if-changed=../kernels/libtorch_link.rs");
     match std::env::var("DEP_MFM_NET_LIBTORCH_LIB") {
         Ok(lib) => libtorch_link::emit_link_args(&lib),
         Err(_) => panic!(

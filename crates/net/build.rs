@@ -1,61 +1,23 @@
-//! Embeds an rpath to libtorch's library folder into this crate's binaries and
-//! tests (and, with a CUDA libtorch, keeps `libtorch_cuda.so` linked; see
-//! `libtorch_link.rs`), passes the folder on to dependent crates, and compiles the C++ shim
-//! (`csrc/mfm_autograd.cpp`) that lets autograd call operations written in Rust.
-//!
-//! torch-sys reports the folder it linked against as `DEP_TCH_LIBTORCH_LIB`
-//! (its `links` key is "tch"). Link arguments printed by a build script only
-//! reach that package's own targets, so every crate with binaries or tests that
-//! link libtorch (net, fm, cli) has a build script calling the same logic; this
-//! one re-exports the folder as `DEP_MFM_NET_LIBTORCH_LIB` for them.
-//!
-//! The shim is compiled against the headers of the same libtorch
-//! (`<lib>/../include` and `<lib>/../include/torch/csrc/api/include`), with the
-//! C++11 ABI flag torch-sys uses (`LIBTORCH_CXX11_ABI`, default `1`, which is
-//! what the pip wheels of torch 2.x are built with).
+//! Embeds an rpath to libtorch's library folder into this crate's tests and
+//! passes the folder on to dependent crates as `DEP_MFM_NET_LIBTORCH_LIB`
+//! (this crate's `links` key is "mfm_net"). The folder comes from the
+//! kernels crate's build script (`DEP_MFM_KERNELS_LIBTORCH_LIB`), which also
+//! compiles the C++ autograd shim; see `crates/kernels/build.rs`.
 
-use std::path::PathBuf;
-
-#[path = "libtorch_link.rs"]
+#[path = "../kernels/libtorch_link.rs"]
 mod libtorch_link;
 
 fn main() {
-    println!("cargo:rerun-if-env-changed=DEP_TCH_LIBTORCH_LIB");
-    println!("cargo:rerun-if-env-changed=LIBTORCH_CXX11_ABI");
-    println!("cargo:rerun-if-changed=csrc/mfm_autograd.cpp");
-    println!("cargo:rerun-if-changed=libtorch_link.rs");
-    let Ok(lib) = std::env::var("DEP_TCH_LIBTORCH_LIB") else {
-        panic!(
-            "torch-sys did not report its libtorch folder (DEP_TCH_LIBTORCH_LIB); \
+    println!("cargo:rerun-if-env-changed=DEP_MFM_KERNELS_LIBTORCH_LIB");
+    println!("cargo:rerun-if-changed=../kernels/libtorch_link.rs");
+    match std::env::var("DEP_MFM_KERNELS_LIBTORCH_LIB") {
+        Ok(lib) => {
+            libtorch_link::emit_link_args(&lib);
+            println!("cargo:libtorch_lib={lib}");
+        }
+        Err(_) => panic!(
+            "mfm-kernels did not report its libtorch folder (DEP_MFM_KERNELS_LIBTORCH_LIB); \
              set LIBTORCH to the torch install (see `cargo xtask setup`)"
-        );
-    };
-    libtorch_link::emit_link_args(&lib);
-    println!("cargo:libtorch_lib={lib}");
-
-    let root = PathBuf::from(&lib).join("..");
-    let include = root.join("include");
-    let api_include = include.join("torch/csrc/api/include");
-    let abi = std::env::var("LIBTORCH_CXX11_ABI").unwrap_or_else(|_| "1".to_owned());
-    cc::Build::new()
-        .cpp(true)
-        .pic(true)
-        .warnings(false)
-        .include(&include)
-        .include(&api_include)
-        .flag("-std=c++17")
-        .flag(format!("-D_GLIBCXX_USE_CXX11_ABI={abi}"))
-        .flag("-DGLOG_USE_GLOG_EXPORT")
-        // ATen's `parallel_for` is an inline template over `#pragma omp
-        // parallel` in OpenMP builds of torch: without `-fopenmp` it quietly
-        // runs the whole range on the calling thread.
-        .flag("-fopenmp")
-        .opt_level(2)
-        .file("csrc/mfm_autograd.cpp")
-        .compile("mfm_autograd");
-    // The OpenMP runtime is the one libtorch itself loads (the wheel ships
-    // `libgomp.so.1` beside `libtorch_cpu.so`), so Rust kernels and torch's
-    // own share one thread pool.
-    println!("cargo:rustc-link-search=native={lib}");
-    println!("cargo:rustc-link-lib=dylib:+verbatim=libgomp.so.1");
+        ),
+    }
 }

@@ -1,14 +1,14 @@
 //! `mfm train --mode predictor|arbitrary`, `mfm sample --source` and
 //! `mfm eval-arbitrary` for an arbitrary-source run: the wiring around
-//! `mfm_fm::arbitrary`.
+//! `mfm_arbitrary`.
 
 use crate::mesh_arg::{load_mesh_checked, mesh_path};
 use crate::output::{ensure_empty, prepare_outputs};
 use crate::pictures::save_grid;
 use anyhow::{Context, Result, bail};
-use mfm_fm::arbitrary::TrainReport;
-use mfm_fm::arbitrary::flow::{self, ARBITRARY_SPEC, ArbitrarySampler, FlowConfig};
-use mfm_fm::arbitrary::predictor::{self, PREDICTOR_SPEC, PredictorConfig};
+use mfm_arbitrary::TrainReport;
+use mfm_arbitrary::flow::{self, ARBITRARY_SPEC, ArbitrarySampler, FlowConfig};
+use mfm_arbitrary::predictor::{self, PREDICTOR_SPEC, PredictorConfig};
 use mfm_geometry::TriMesh;
 use mfm_render::{ColorRange, Panel};
 use std::path::{Path, PathBuf};
@@ -347,8 +347,8 @@ pub struct EvalArgs {
 
 /// Runs `mfm eval-arbitrary`.
 pub fn eval(a: EvalArgs) -> Result<()> {
+    use mfm_arbitrary::evaluate::evaluate_set;
     use mfm_data::layout::{HOLDOUT, REFERENCE};
-    use mfm_fm::arbitrary::evaluate::evaluate_set;
     let sets: Vec<&str> = [HOLDOUT, REFERENCE]
         .into_iter()
         .filter(|s| a.experiment.join(s).join("manifest.json").is_file())

@@ -4,7 +4,7 @@ use crate::mesh_arg::{load_mesh, load_mesh_checked, mesh_path};
 use crate::output::{prepare_outputs, write_json, write_matrix_market, write_npy};
 use anyhow::{Context, Result, bail};
 use clap::{Subcommand, ValueEnum};
-use mfm_geometry::{MeshReport, TriMesh, operators};
+use mfm_geometry::{MeshReport, operators};
 use std::path::PathBuf;
 
 /// Every `mfm` subcommand.
@@ -312,7 +312,7 @@ gamma = ||M^-1 L||_F",
 fn convert(spec: &str, out: &std::path::Path) -> Result<()> {
     let mesh = load_mesh(spec)?;
     let undo = prepare_outputs(&[mesh_path(spec)], &[out.to_path_buf()])?;
-    write_mesh(&mesh, out)?;
+    mfm_meshio::write_mesh(out, &mesh)?;
     undo.keep();
     println!(
         "wrote {} ({} vertices, {} faces)",
@@ -320,18 +320,6 @@ fn convert(spec: &str, out: &std::path::Path) -> Result<()> {
         mesh.num_vertices(),
         mesh.num_faces()
     );
-    Ok(())
-}
-
-pub(crate) fn write_mesh(mesh: &TriMesh, out: &std::path::Path) -> Result<()> {
-    let ext = out
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
-    match ext.as_deref() {
-        Some("obj") => mfm_meshio::write_obj(out, mesh)?,
-        Some("ply") => mfm_meshio::write_ply(out, mesh, &[])?,
-        _ => bail!("{}: output must end in .obj or .ply", out.display()),
-    }
     Ok(())
 }
 

@@ -57,7 +57,7 @@ pub fn run(a: RemeshArgs) -> Result<()> {
         let space = mfm_data::layout::read_space(path)?;
         mesh = damaged_mesh(&mesh, &space, damage, a.seed)?;
     }
-    crate::commands::write_mesh(&mesh, &a.out)?;
+    mfm_meshio::write_mesh(&a.out, &mesh)?;
     undo.keep();
     println!(
         "{}: {} vertices, {} faces (from {} vertices, {} faces)",

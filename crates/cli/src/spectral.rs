@@ -8,7 +8,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use mfm_geometry::operators::Operators;
 use mfm_noise::spectrum::{MeshSpectrum, SpectrumFile, compare};
 use mfm_noise::stream;
-use mfm_noise::{DEFAULT_TAU, NoiseKind, NoiseSampler, SpectralAnalyzer, SpectrumComparison};
+use mfm_noise::{NoiseKind, NoiseSampler, SpectralAnalyzer, SpectrumComparison};
 use mfm_render::plots::{self, HistogramPanel, VarianceSeries};
 use mfm_render::{ColorRange, Colormap, RenderOptions, render_mesh, save_png};
 use mfm_solver::{EigenOptions, generalized_eigenpairs};
@@ -124,69 +124,22 @@ pub struct KindArgs {
 }
 
 impl KindArgs {
-    /// The [`NoiseKind`] these flags describe; flags that the kind does not
-    /// use are an error rather than silently ignored.
+    /// The [`NoiseKind`] these flags describe ([`NoiseKind::from_parts`]
+    /// for the long form); flags that the kind does not use are an error
+    /// rather than silently ignored.
     pub fn to_kind(&self) -> Result<NoiseKind> {
         if let Some(kind) = self.noise {
             return Ok(kind);
         }
-        let unused = |flag: &str| -> Result<NoiseKind> {
-            let name = clap::ValueEnum::to_possible_value(&self.kind)
-                .map(|v| v.get_name().to_owned())
-                .unwrap_or_default();
-            bail!("{flag} does not apply to --kind {name}")
+        let name = match self.kind {
+            KindName::Matern => mfm_noise::KindName::Matern,
+            KindName::MaternNormalized => mfm_noise::KindName::MaternNormalized,
+            KindName::White => mfm_noise::KindName::White,
+            KindName::Naive => mfm_noise::KindName::Naive,
+            KindName::Explicit => mfm_noise::KindName::Explicit,
         };
-        let kind = match self.kind {
-            KindName::Matern => {
-                if self.c.is_some() {
-                    return unused("--c");
-                }
-                if self.k_noise.is_some() {
-                    return unused("--k-noise");
-                }
-                NoiseKind::Matern {
-                    tau: self.tau.unwrap_or(DEFAULT_TAU),
-                }
-            }
-            KindName::MaternNormalized => {
-                if self.tau.is_some() {
-                    return unused("--tau (the normalized kind sets tau = c Gamma; use --c)");
-                }
-                if self.k_noise.is_some() {
-                    return unused("--k-noise");
-                }
-                NoiseKind::MaternNormalized {
-                    c: self.c.unwrap_or(1e-4),
-                }
-            }
-            KindName::White | KindName::Naive => {
-                if self.tau.is_some() {
-                    return unused("--tau");
-                }
-                if self.c.is_some() {
-                    return unused("--c");
-                }
-                if self.k_noise.is_some() {
-                    return unused("--k-noise");
-                }
-                if matches!(self.kind, KindName::White) {
-                    NoiseKind::White
-                } else {
-                    NoiseKind::Naive
-                }
-            }
-            KindName::Explicit => {
-                if self.c.is_some() {
-                    return unused("--c");
-                }
-                NoiseKind::Explicit {
-                    k: self.k_noise.unwrap_or(64),
-                    tau: self.tau.unwrap_or(DEFAULT_TAU),
-                }
-            }
-        };
-        kind.validate()?;
-        Ok(kind)
+        // the library names the parameter (`k` is the flag --k-noise)
+        Ok(NoiseKind::from_parts(name, self.tau, self.c, self.k_noise)?)
     }
 }
 

@@ -194,7 +194,7 @@ impl Adam {
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use crate::train::INIT_LOCK;
+    use crate::seeding::INIT_LOCK;
     use mfm_net::{HeadKind, MeshTensors, loss};
 
     /// Independent oracle: libtorch's own Adam and tch's gradient clipping

@@ -364,15 +364,18 @@ impl Default for NoiseConfig {
     }
 }
 
-/// Serializes a [`NoiseKind`] as its command-line string.
-pub(crate) mod noise_kind_string {
+/// Serializes a [`NoiseKind`] as its command-line string (for
+/// `#[serde(with = "mfm_fm::config::noise_kind_string")]`).
+pub mod noise_kind_string {
     use mfm_noise::NoiseKind;
     use serde::{Deserialize, Deserializer, Serializer};
 
+    /// Writes `k` as its text form (`matern:100`).
     pub fn serialize<S: Serializer>(k: &NoiseKind, s: S) -> Result<S::Ok, S::Error> {
         s.serialize_str(&k.to_string())
     }
 
+    /// Reads a kind from its text form.
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<NoiseKind, D::Error> {
         let s = String::deserialize(d)?;
         s.parse().map_err(serde::de::Error::custom)

@@ -4,15 +4,17 @@
 //! PoissonNet along the rectified-flow path from Matérn noise, ODE sampling
 //! on any triangulation, run configurations and checkpoints. The datasets,
 //! generators, metrics and quality measures live in the libtorch-free
-//! [`mfm_data`] crate and are re-exported here under their old paths.
+//! [`mfm_data`] crate and are re-exported here under their old paths; the
+//! arbitrary-source model, built on this crate's context, Adam, seeding
+//! and checkpoint format, is the `mfm-arbitrary` crate.
 
 pub mod adam;
-pub mod arbitrary;
 pub mod checkpoint;
 pub mod config;
 pub mod context;
 pub mod error;
 pub mod sample;
+pub mod seeding;
 pub mod train;
 
 pub use error::{FmError, Result};

@@ -64,8 +64,8 @@ use std::collections::BTreeMap;
 use std::fs::OpenOptions;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -73,8 +73,7 @@ use mfm_geometry::TriMesh;
 use mfm_geometry::frame::{CanonicalFrame, SurfaceSize};
 use mfm_net::{HeadKind, MeshTensors, PoissonNet, loss};
 use mfm_noise::NoiseSampler;
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha8Rng;
+use rand::Rng;
 use tch::{Device, Tensor};
 
 pub use crate::adam::Adam;
@@ -86,6 +85,7 @@ use crate::config::{DeviceChoice, FrameChoice, NoiseScale, RunConfig};
 use crate::context::MeshContext;
 use crate::error::{FmError, Result};
 use crate::sample::{conditioning, offset_tensor, positions_tensor};
+use crate::seeding::{INIT_LOCK, derived_rng};
 use crate::signals::{FramedPositions, SignalSource};
 
 /// Header of the training log.
@@ -105,32 +105,6 @@ const PURPOSE_AUGMENT: u64 = 4;
 const STATS_SIGNALS: usize = 256;
 /// Noise samples drawn to estimate the noise's magnitude.
 const STATS_NOISE: usize = 64;
-
-/// Serializes the seeding of libtorch's global generator with the creation
-/// of a network, so concurrent trainers in one process get reproducible
-/// initial weights.
-pub(crate) static INIT_LOCK: Mutex<()> = Mutex::new(());
-
-fn splitmix64(x: &mut u64) -> u64 {
-    *x = x.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    let mut z = *x;
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// The generator of stream `stream` of the key derived from `(seed,
-/// purpose)`: a pure function of its arguments.
-pub(crate) fn derived_rng(seed: u64, purpose: u64, stream: u64) -> ChaCha8Rng {
-    let mut state = seed ^ purpose.wrapping_mul(0xD6E8_FEB8_6659_FD93);
-    let mut key = [0u8; 32];
-    for chunk in key.chunks_mut(8) {
-        chunk.copy_from_slice(&splitmix64(&mut state).to_le_bytes());
-    }
-    let mut rng = ChaCha8Rng::from_seed(key);
-    rng.set_stream(stream);
-    rng
-}
 
 /// Batch order: an endless sequence of epochs, each a permutation of
 /// `0..n` that depends only on `(seed, epoch)`.
@@ -462,7 +436,7 @@ fn with_resumable_edits(run_dir: &Path, saved: RunConfig, step: u64) -> Result<R
 
 /// Rewrites the log keeping the header and the rows with `step <= keep`
 /// (creates it with only the header when missing).
-pub(crate) fn truncate_log(path: &Path, keep: u64) -> Result<()> {
+pub fn truncate_log(path: &Path, keep: u64) -> Result<()> {
     let text = match std::fs::read_to_string(path) {
         Ok(t) => t,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
@@ -1038,14 +1012,6 @@ mod tests {
         assert_eq!(b.indices(7, 3), all[21..24]);
         assert_eq!(b.indices(2, 3), all[6..9]);
         assert_ne!(EpochOrder::new(8, 10).indices(0, 10), all[..10]);
-    }
-
-    #[test]
-    fn derived_streams_differ_by_purpose_and_stream() {
-        let draw = |p, s| derived_rng(3, p, s).random::<u64>();
-        assert_eq!(draw(PURPOSE_TIME, 4), draw(PURPOSE_TIME, 4));
-        assert_ne!(draw(PURPOSE_TIME, 4), draw(PURPOSE_TIME, 5));
-        assert_ne!(draw(PURPOSE_TIME, 4), draw(PURPOSE_EPOCH, 4));
     }
 
     #[test]

@@ -531,12 +531,12 @@ fn cpu_preset_step_time() {
     cfg.train.device = DeviceChoice::Cpu;
     let run = tempfile::tempdir().unwrap();
     let mut t = Trainer::new(run.path(), cfg, &mesh, signals).unwrap();
-    mfm_net::profile::set_enabled(true);
-    let cpu0 = mfm_net::profile::process_cpu_seconds();
+    mfm_kernels::profile::set_enabled(true);
+    let cpu0 = mfm_kernels::profile::process_cpu_seconds();
     let s = t.run(&no_stop(), false).unwrap();
-    let cpu = mfm_net::profile::process_cpu_seconds() - cpu0;
-    mfm_net::profile::set_enabled(false);
-    for (name, total) in mfm_net::profile::totals() {
+    let cpu = mfm_kernels::profile::process_cpu_seconds() - cpu0;
+    mfm_kernels::profile::set_enabled(false);
+    for (name, total) in mfm_kernels::profile::totals() {
         eprintln!(
             "{name:<32} cpu {:8.1} ms/step  wall {:8.1} ms/step",
             1e3 * total.cpu / s.end_step as f64,

@@ -337,6 +337,53 @@ fn grid_strategy() -> impl Strategy<Value = TriMesh> {
     })
 }
 
+/// `G` rebuilt from [`Operators::face_gradients`] by scattering each face's
+/// two rows into its corners' columns, as exact `(row, col) -> value`
+/// entries (structural zeros left out).
+fn scattered_face_gradients(mesh: &TriMesh, ops: &Operators) -> HashMap<(usize, usize), u64> {
+    let mut out = HashMap::new();
+    for (f, (t, rows)) in mesh.faces().iter().zip(&ops.face_gradients).enumerate() {
+        for (r, row) in rows.iter().enumerate() {
+            for (c, &x) in row.iter().enumerate() {
+                if x != 0.0 {
+                    out.insert((2 * f + r, t[c] as usize), x.to_bits());
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The face table and the sparse `G` agree bit for bit.
+fn check_face_gradients(mesh: &TriMesh, ops: &Operators) {
+    assert_eq!(ops.face_gradients.len(), mesh.num_faces());
+    let sparse: HashMap<(usize, usize), u64> = entries(&ops.gradient)
+        .filter(|&(_, _, x)| x != 0.0)
+        .map(|(i, j, x)| ((i, j), x.to_bits()))
+        .collect();
+    assert_eq!(scattered_face_gradients(mesh, ops), sparse);
+}
+
+#[test]
+fn face_gradients_are_the_entries_of_g() {
+    // a grid, and the same grid with one face collapsed (lenient operators
+    // give it zero rows in both forms)
+    let mesh = grid(5, 4, &[0.3; 30]);
+    check_face_gradients(&mesh, &Operators::new(&mesh).unwrap());
+    let mut positions = mesh.positions().to_vec();
+    let t = mesh.faces()[7];
+    positions[t[2] as usize] = positions[t[0] as usize];
+    let collapsed = mesh.with_positions(positions).unwrap();
+    let lenient = Operators::new_lenient(&collapsed);
+    assert!(!lenient.degenerate_faces.is_empty());
+    assert_eq!(lenient.face_gradients[7], [[0.0; 3]; 2]);
+    check_face_gradients(&collapsed, &lenient);
+    for (name, mesh) in shared_meshes() {
+        eprintln!("{name}");
+        check_face_gradients(&mesh, &Operators::new_lenient(&mesh));
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
 
@@ -348,6 +395,7 @@ proptest! {
         check_laplacian_and_mass("grid", &mesh, &ops);
         let err = linear_function_error(&mesh, &ops, [0.4, -0.8, 1.1]);
         prop_assert!(err < 1e-12, "gradient of a linear function off by {:e}", err);
+        check_face_gradients(&mesh, &ops);
     }
 
     #[test]

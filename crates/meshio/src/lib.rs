@@ -396,6 +396,12 @@ pub enum WriteErrorKind {
     /// device, a FIFO).
     #[error("{0}")]
     Refused(String),
+    /// The file name's extension names no format mfm writes.
+    #[error("the name must end in .obj or .ply (found {found:?})")]
+    UnsupportedExtension {
+        /// The extension found (empty when there is none).
+        found: String,
+    },
     /// A scalar property name is not usable in a PLY header.
     #[error("scalar property name {name:?} is invalid: {reason}")]
     InvalidScalarName {
@@ -414,6 +420,28 @@ pub enum WriteErrorKind {
         /// The number of values given.
         found: usize,
     },
+}
+
+/// Writes `mesh` in the format its name's extension says (case-insensitive):
+/// `.obj` as [`write_obj`], `.ply` as [`write_ply`] without scalars.
+///
+/// # Errors
+/// [`WriteErrorKind::UnsupportedExtension`] for any other name (nothing is
+/// written), else those of the writer.
+pub fn write_mesh(path: impl AsRef<Path>, mesh: &TriMesh) -> Result<(), WriteError> {
+    let path = path.as_ref();
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    match ext.as_str() {
+        "obj" => write_obj(path, mesh),
+        "ply" => write_ply(path, mesh, &[]),
+        _ => Err(WriteError::new(
+            path,
+            WriteErrorKind::UnsupportedExtension { found: ext },
+        )),
+    }
 }
 
 /// Writes `mesh` as Wavefront OBJ text: a comment line, `v x y z` lines and

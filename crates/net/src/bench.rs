@@ -16,11 +16,11 @@ use tch::nn::OptimizerConfig;
 use tch::{Device, Kind, Tensor, nn};
 
 use crate::config::PoissonNetConfig;
-use crate::error::{NetError, Result};
 use crate::loss::flow_matching_loss;
-use crate::mesh::MeshTensors;
 use crate::model::PoissonNet;
-use crate::profile;
+use mfm_kernels::error::{NetError, Result};
+use mfm_kernels::mesh::MeshTensors;
+use mfm_kernels::profile;
 
 /// Options of [`bench_training_step`].
 #[derive(Clone, Debug, PartialEq)]
@@ -41,9 +41,9 @@ pub struct BenchOptions {
     pub learning_rate: f64,
     /// Seed of the weights and the synthetic inputs.
     pub seed: i64,
-    /// Also collect per-section times ([`crate::profile`]).
+    /// Also collect per-section times ([`mfm_kernels::profile`]).
     pub profile: bool,
-    /// Call [`crate::runtime::tune_allocator`] first (recommended).
+    /// Call [`mfm_kernels::runtime::tune_allocator`] first (recommended).
     pub tune_allocator: bool,
 }
 
@@ -67,7 +67,7 @@ impl Default for BenchOptions {
 /// One row of [`BenchReport::sections`] (per timed step).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SectionRow {
-    /// Section name (see [`crate::profile`]).
+    /// Section name (see [`mfm_kernels::profile`]).
     pub name: String,
     /// Wall seconds per step.
     pub wall: f64,
@@ -115,7 +115,7 @@ pub struct BenchReport {
     pub sections: Vec<SectionRow>,
 }
 
-pub use crate::profile::process_cpu_seconds;
+pub use mfm_kernels::profile::process_cpu_seconds;
 
 /// Median of a sample (0 for an empty one).
 pub fn median(xs: &[f64]) -> f64 {
@@ -144,14 +144,14 @@ impl BenchReport {
     }
 
     /// With [`BenchOptions::profile`]: wall seconds per step spent inside the
-    /// dense layers' autograd nodes, forward and backward ([`crate::kernels::dense`]'s
+    /// dense layers' autograd nodes, forward and backward ([`mfm_kernels::dense`]'s
     /// `linear` and `complex_linear` sections: the products and the bias
     /// and sum passes around them); `None` without a profile or when no
     /// dense layer ran on the CPU.
     pub fn profiled_product_seconds(&self) -> Option<f64> {
         let dense_node = |section: &str| {
             section.strip_prefix("fn:").is_some_and(|node| {
-                crate::kernels::dense::NODE_NAMES.contains(&node.strip_suffix("^T").unwrap_or(node))
+                mfm_kernels::dense::NODE_NAMES.contains(&node.strip_suffix("^T").unwrap_or(node))
             })
         };
         let total: f64 = self
@@ -361,7 +361,7 @@ pub fn bench_training_step(
         return Err(NetError::Config("batch must be at least 1".into()));
     }
     if opts.tune_allocator {
-        crate::runtime::tune_allocator();
+        mfm_kernels::runtime::tune_allocator();
     }
     if let Some(t) = opts.threads {
         tch::set_num_threads(t.max(1));

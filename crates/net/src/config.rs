@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{NetError, Result};
+use mfm_kernels::error::{NetError, Result};
 
 /// Which output head the network ends with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -190,7 +190,7 @@ impl PoissonNetConfig {
     /// products in one forward pass of one batch item on a mesh with
     /// `num_vertices` vertices and `num_faces` faces, as the CPU path of
     /// [`crate::PoissonNet::forward`] runs them: complex layers at least
-    /// [`crate::kernels::dense::GAUSS_MIN_WIDTH`] wide with three real products
+    /// [`mfm_kernels::dense::GAUSS_MIN_WIDTH`] wide with three real products
     /// (narrower ones with four), the modulation's first layer and each
     /// block's last complex layer on vertices, and the columns of the first
     /// vertex MLP that read the solve output folded into that last layer
@@ -206,7 +206,7 @@ impl PoissonNetConfig {
         let w = self.width as u64;
         // multiply-adds of `rows` complex rows through a `k -> o` complex layer
         let complex = |rows: u64, k: u64, o: u64| {
-            let products = if k.min(o) >= crate::kernels::dense::GAUSS_MIN_WIDTH as u64 {
+            let products = if k.min(o) >= mfm_kernels::dense::GAUSS_MIN_WIDTH as u64 {
                 3
             } else {
                 4

@@ -1,33 +1,25 @@
 //! # mfm-net
 //!
 //! PoissonNet (the paper's denoiser, DESIGN.md section 5) on libtorch
-//! through `tch`: a differentiable Poisson solve, mesh operators as
-//! differentiable tensor operations, the network with its NJF and linear
-//! heads, safetensors checkpoints, and a training-step benchmark.
+//! through `tch`: the layers, the network with its NJF and linear heads,
+//! its configuration and presets, safetensors checkpoints, the losses and
+//! a training-step benchmark. The tensor operations under it (the
+//! differentiable Poisson solve, the mesh operators, the dense and fused
+//! kernels, the autograd bridge with its C++ shim) are the
+//! [`mfm_kernels`] crate; the items the network's users need from it are
+//! re-exported here ([`MeshTensors`], [`NetError`], [`runtime`]).
 //!
 //! This crate links the libtorch 2.13 shared libraries of the project's
 //! Python environment (see `cargo xtask setup`); its build script embeds an
-//! rpath so binaries run without `LD_LIBRARY_PATH`, and compiles a small C++
-//! shim that makes Rust operations autograd nodes ([`autograd`]).
+//! rpath so binaries run without `LD_LIBRARY_PATH`.
 //!
 //! ## Modules
-//! - [`autograd`]: custom autograd operations in Rust ([`autograd::apply_custom`],
-//!   [`autograd::apply_linear`]); why a C++ shim instead of splitting graphs.
-//! - [`mesh`]: [`MeshTensors`], one mesh's `G`, `G^T`, face means, mass
-//!   means and the cached Cholesky factor of `L + eps I` as differentiable ops.
 //! - [`layers`]: one file per layer kind (complex linear, vector MLP,
 //!   vertex MLP, Poisson block); [`model`]: [`PoissonNet`] assembling them;
 //!   [`config`]: [`PoissonNetConfig`] with the presets `paper`, `medium`,
 //!   `small`.
-//! - [`kernels`]: the CPU kernels under the layers: [`kernels::dense`]
-//!   (`linear` layers and the complex layers' products with faer's matrix
-//!   products), [`kernels::fused`] (fused kernels for the modulation and the
-//!   magnitude nonlinearity, with their torch reference implementations),
-//!   the mesh operators' gather kernels and fast `f32` math.
 //! - [`loss`]: mass- and area-weighted MSE, the flow-matching loss.
-//! - [`mod@bench`]: [`bench::bench_training_step`] (what `mfm net bench` runs);
-//!   [`profile`]: per-section timers.
-//! - [`runtime`]: what the linked libtorch offers (threads, CUDA).
+//! - [`mod@bench`]: [`bench::bench_training_step`] (what `mfm net bench` runs).
 //!
 //! ## Devices and element types
 //! Everything runs on the CPU; with a CUDA libtorch and a GPU the network and
@@ -36,7 +28,7 @@
 //! [`PoissonNet::new`] draws the parameters on the CPU and then moves them,
 //! so a seed gives the same network on either device. Binaries and tests of
 //! this workspace keep a CUDA libtorch's `libtorch_cuda.so` linked (see
-//! `crates/net/libtorch_link.rs`); a crate of your own that links this one
+//! `crates/kernels/libtorch_link.rs`); a crate of your own that links this one
 //! needs the same link argument in its build script, or libtorch will not see
 //! the GPU.
 //! Parameters are `f32` by default; [`PoissonNet::set_kind`] switches to `f64`
@@ -49,7 +41,7 @@
 //! then by elementwise work on the face features, then by the sparse solves.
 //! What this crate does about it:
 //! - complex layers at least 64 channels wide take three real products
-//!   instead of four (Gauss's form, [`kernels::dense::complex_linear`]), forward and
+//!   instead of four (Gauss's form, [`mfm_kernels::dense::complex_linear`]), forward and
 //!   in both backward products: the paper step's dense work drops to ~444
 //!   GFLOP;
 //! - a block's last complex layer runs after the divergence, on vertices:
@@ -63,15 +55,15 @@
 //!   before the solve (exact, see [`model`]), ~379 GFLOP per paper step
 //!   ([`PoissonNetConfig::forward_product_flops`] is the cost model; a test
 //!   checks it against the products the layers run,
-//!   [`kernels::dense::counted_product_flops`]);
-//! - dense layers use faer's GEMM ([`kernels::dense`]), ~15-25% faster per core than
+//!   [`mfm_kernels::dense::counted_product_flops`]);
+//! - dense layers use faer's GEMM ([`mfm_kernels::dense`]), ~15-25% faster per core than
 //!   the MKL inside the torch wheel on the AMD benchmark machine;
 //! - the modulation and the magnitude nonlinearity are single-pass fused
-//!   kernels in `f32` ([`kernels::fused`]), 2-3x less time than the torch graph;
-//! - `G`, `G^T A2`, face means are gather kernels ([`mesh`]); the first
+//!   kernels in `f32` ([`mfm_kernels::fused`]), 2-3x less time than the torch graph;
+//! - `G`, `G^T A2`, face means are gather kernels ([`mfm_kernels::mesh`]); the first
 //!   modulation layer runs on vertices (exact rewrite, see [`model`]);
 //! - Rust kernels run on libtorch's own intra-op threads
-//!   ([`autograd::parallel_for`]; the shim is compiled with OpenMP and linked
+//!   ([`mfm_kernels::autograd::parallel_for`]; the shim is compiled with OpenMP and linked
 //!   against the `libgomp` that ships with libtorch, so there is one pool).
 //!
 //! Two process settings matter a lot and are the caller's choice:
@@ -108,19 +100,12 @@
 //! l.backward(); // through both Poisson solves of the forward pass
 //! ```
 
-pub mod autograd;
 pub mod bench;
 pub mod config;
-pub mod error;
-pub mod kernels;
 pub mod layers;
 pub mod loss;
-pub mod mesh;
 pub mod model;
-pub mod profile;
-pub mod runtime;
 
 pub use config::{HeadKind, PRESETS, PoissonNetConfig};
-pub use error::{NetError, Result};
-pub use mesh::{Backend, MeshTensors};
+pub use mfm_kernels::{Backend, MeshTensors, NetError, Result, error, mesh, runtime};
 pub use model::{LayerRow, PoissonNet, PoissonNetOutput, Summary};

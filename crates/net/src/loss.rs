@@ -6,9 +6,9 @@
 
 use tch::Tensor;
 
-use crate::error::{Result, shape_error};
-use crate::mesh::MeshTensors;
 use crate::model::PoissonNetOutput;
+use mfm_kernels::error::{Result, shape_error};
+use mfm_kernels::mesh::MeshTensors;
 
 /// Mass-weighted mean squared error of vertex signals `a`, `b: [B, V, C]`:
 /// `mean over (batch, channel) of sum_v m_v (a - b)^2 / sum_v m_v`.

@@ -45,12 +45,12 @@ use tch::nn;
 use tch::{Device, Kind, Tensor};
 
 use crate::config::{HeadKind, PoissonNetConfig};
-use crate::error::{NetError, Result, shape_error};
 use crate::layers::{Mlp, PoissonBlock, VectorMlp, dense, linear};
-use crate::mesh::MeshTensors;
-use crate::profile::section;
+use mfm_kernels::error::{NetError, Result, shape_error};
+use mfm_kernels::mesh::MeshTensors;
+use mfm_kernels::profile::section;
 
-pub use crate::kernels::fused::{
+pub use mfm_kernels::fused::{
     MAGNITUDE_EPS, SCALE_EPS, magnitude_gelu_reference, modulate_reference,
 };
 

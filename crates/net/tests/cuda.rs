@@ -2,6 +2,7 @@
 //! Skips (passes with a note) when libtorch sees no GPU.
 #![allow(clippy::unwrap_used)]
 
+#[path = "../../kernels/tests/common/mod.rs"]
 mod common;
 
 use common::rel_max_diff;

@@ -1,14 +1,15 @@
 //! The cost model `PoissonNetConfig::forward_product_flops` against the
 //! products the network actually runs, counted by the dense layers
-//! (`mfm_net::kernels::dense::counted_product_flops`). One test in its own binary: the
+//! (`mfm_kernels::dense::counted_product_flops`). One test in its own binary: the
 //! counter is process-wide, so no other test may run products meanwhile.
 #![allow(clippy::unwrap_used)]
 
+#[path = "../../kernels/tests/common/mod.rs"]
 mod common;
 
 use common::randn;
 use mfm_geometry::procedural;
-use mfm_net::kernels::dense::counted_product_flops;
+use mfm_kernels::dense::counted_product_flops;
 use mfm_net::{HeadKind, MeshTensors, PoissonNet, PoissonNetConfig};
 use tch::{Device, Kind};
 

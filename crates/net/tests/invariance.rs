@@ -2,13 +2,14 @@
 //! refinement of the triangulation.
 #![allow(clippy::unwrap_used)]
 
+#[path = "../../kernels/tests/common/mod.rs"]
 mod common;
 
 use std::sync::Arc;
 
 use common::{randn, rel_max_diff};
 use faer::sparse::{SparseColMat, Triplet};
-use mfm_geometry::operators::Operators;
+use mfm_geometry::operators::{FaceGradient, Operators};
 use mfm_geometry::{TriMesh, procedural, subdivide};
 use mfm_net::{HeadKind, MeshTensors, PoissonNet, PoissonNetConfig};
 use mfm_solver::LaplacianSolver;
@@ -60,6 +61,22 @@ fn rotate_frames(g: &SparseColMat<usize, f64>, theta: &[f64]) -> SparseColMat<us
     SparseColMat::try_new_from_triplets(g.nrows(), g.ncols(), &trip).unwrap()
 }
 
+/// The same rotation applied to the per-face table of `G` (what
+/// `MeshTensors` reads).
+fn rotate_face_gradients(rows: &[FaceGradient], theta: &[f64]) -> Vec<FaceGradient> {
+    rows.iter()
+        .zip(theta)
+        .map(|([r0, r1], t)| {
+            let (s, c) = t.sin_cos();
+            let turn = |a: f64, b: f64| [c * a - s * b, s * a + c * b];
+            let [x0, y0] = turn(r0[0], r1[0]);
+            let [x1, y1] = turn(r0[1], r1[1]);
+            let [x2, y2] = turn(r0[2], r1[2]);
+            [[x0, x1, x2], [y0, y1, y2]]
+        })
+        .collect()
+}
+
 #[test]
 fn per_face_frame_rotation_leaves_vertex_outputs_unchanged() {
     let mesh = procedural::icosphere(2);
@@ -71,6 +88,7 @@ fn per_face_frame_rotation_leaves_vertex_outputs_unchanged() {
         .collect();
     let mut rotated = ops.clone();
     rotated.gradient = rotate_frames(&ops.gradient, &theta);
+    rotated.face_gradients = rotate_face_gradients(&ops.face_gradients, &theta);
     let a = MeshTensors::from_operators(mesh.faces(), &ops, Arc::clone(&solver)).unwrap();
     let b = MeshTensors::from_operators(mesh.faces(), &rotated, solver).unwrap();
 

@@ -2,6 +2,7 @@
 //! saving and loading.
 #![allow(clippy::unwrap_used)]
 
+#[path = "../../kernels/tests/common/mod.rs"]
 mod common;
 
 use common::{check_directional, check_parameters, randn, rel_max_diff};

@@ -31,6 +31,19 @@ pub enum NoiseError {
         reason: String,
     },
 
+    /// A parameter was given, in the long form of a noise kind
+    /// ([`NoiseKind::from_parts`](crate::NoiseKind::from_parts)), to a kind
+    /// that does not take it.
+    #[error("{parameter} does not apply to {kind} noise{hint}")]
+    UnusedParameter {
+        /// The kind's name (`"matern"`, ...).
+        kind: &'static str,
+        /// The parameter (`"tau"`, `"c"`, `"k"`).
+        parameter: &'static str,
+        /// What to give instead, as `" (...)"`, or empty.
+        hint: &'static str,
+    },
+
     /// A vertex has a lumped mass that is zero, negative or not finite (an
     /// unreferenced vertex, or a degenerate neighbourhood).
     #[error("vertex {vertex} has lumped mass {mass:e}; expected a finite mass > 0 at every vertex")]

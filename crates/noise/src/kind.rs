@@ -11,6 +11,43 @@ use crate::error::{NoiseError, Result};
 /// Default screening weight `tau` of the paper's experiments (`tau = 100`).
 pub const DEFAULT_TAU: f64 = 100.0;
 
+/// Default factor `c` of [`NoiseKind::MaternNormalized`] in the long form
+/// ([`NoiseKind::from_parts`]).
+pub const DEFAULT_NORMALIZED_C: f64 = 1e-4;
+
+/// Default number of eigenpairs of [`NoiseKind::Explicit`] in the long
+/// form ([`NoiseKind::from_parts`]).
+pub const DEFAULT_EXPLICIT_K: usize = 64;
+
+/// A noise kind's name without its parameters: the first word of the
+/// short form, and the `--kind` value of the long form.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum KindName {
+    /// [`NoiseKind::Naive`].
+    Naive,
+    /// [`NoiseKind::White`].
+    White,
+    /// [`NoiseKind::Matern`].
+    Matern,
+    /// [`NoiseKind::MaternNormalized`].
+    MaternNormalized,
+    /// [`NoiseKind::Explicit`].
+    Explicit,
+}
+
+impl KindName {
+    /// The name as the short form writes it (`matern-normalized`...).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Naive => "naive",
+            Self::White => "white",
+            Self::Matern => "matern",
+            Self::MaternNormalized => "matern-normalized",
+            Self::Explicit => "explicit",
+        }
+    }
+}
+
 /// A noise distribution on the vertices of a mesh (DESIGN.md §4, paper §3).
 ///
 /// With `L` the PSD cotangent Laplacian, `M` the lumped mass, `n ~ N(0, I)`
@@ -129,13 +166,87 @@ impl NoiseKind {
     /// Short name of the kind without parameters: `naive`, `white`,
     /// `matern`, `matern-normalized` or `explicit`.
     pub fn name(&self) -> &'static str {
+        self.kind_name().as_str()
+    }
+
+    /// The kind's [`KindName`].
+    pub fn kind_name(&self) -> KindName {
         match self {
-            Self::Naive => "naive",
-            Self::White => "white",
-            Self::Matern { .. } => "matern",
-            Self::MaternNormalized { .. } => "matern-normalized",
-            Self::Explicit { .. } => "explicit",
+            Self::Naive => KindName::Naive,
+            Self::White => KindName::White,
+            Self::Matern { .. } => KindName::Matern,
+            Self::MaternNormalized { .. } => KindName::MaternNormalized,
+            Self::Explicit { .. } => KindName::Explicit,
         }
+    }
+
+    /// The long form of a kind: its name and its parameters one by one
+    /// (`--kind matern --tau 100` on the command line, the same kind as
+    /// `matern:100`). A parameter left out takes its default
+    /// ([`DEFAULT_TAU`], [`DEFAULT_NORMALIZED_C`], [`DEFAULT_EXPLICIT_K`]);
+    /// the result is [validated](NoiseKind::validate).
+    ///
+    /// # Errors
+    /// [`NoiseError::UnusedParameter`] for a parameter the kind does not
+    /// take (rather than ignoring it), [`NoiseError::InvalidParameter`] for
+    /// an out-of-range value.
+    ///
+    /// # Example
+    /// ```
+    /// use mfm_noise::kind::{KindName, NoiseKind};
+    /// let long = NoiseKind::from_parts(KindName::Matern, Some(30.0), None, None).unwrap();
+    /// assert_eq!(long, "matern:30".parse().unwrap());
+    /// assert!(NoiseKind::from_parts(KindName::White, Some(30.0), None, None).is_err());
+    /// ```
+    pub fn from_parts(
+        name: KindName,
+        tau: Option<f64>,
+        c: Option<f64>,
+        k: Option<usize>,
+    ) -> Result<Self> {
+        let kind = name.as_str();
+        let refuse = |parameter: &'static str, hint: &'static str| {
+            Err(NoiseError::UnusedParameter {
+                kind,
+                parameter,
+                hint,
+            })
+        };
+        let (takes_tau, takes_c, takes_k) = match name {
+            KindName::Naive | KindName::White => (false, false, false),
+            KindName::Matern => (true, false, false),
+            KindName::MaternNormalized => (false, true, false),
+            KindName::Explicit => (true, false, true),
+        };
+        if tau.is_some() && !takes_tau {
+            let hint = if name == KindName::MaternNormalized {
+                " (it sets tau = c Gamma; give c)"
+            } else {
+                ""
+            };
+            return refuse("tau", hint);
+        }
+        if c.is_some() && !takes_c {
+            return refuse("c", "");
+        }
+        if k.is_some() && !takes_k {
+            return refuse("k", "");
+        }
+        let tau = tau.unwrap_or(DEFAULT_TAU);
+        let out = match name {
+            KindName::Naive => Self::Naive,
+            KindName::White => Self::White,
+            KindName::Matern => Self::Matern { tau },
+            KindName::MaternNormalized => Self::MaternNormalized {
+                c: c.unwrap_or(DEFAULT_NORMALIZED_C),
+            },
+            KindName::Explicit => Self::Explicit {
+                k: k.unwrap_or(DEFAULT_EXPLICIT_K),
+                tau,
+            },
+        };
+        out.validate()?;
+        Ok(out)
     }
 }
 

@@ -10,7 +10,7 @@ use faer::sparse::SparseColMat;
 use mfm_geometry::TriMesh;
 use mfm_geometry::operators::Operators;
 use mfm_noise::spectrum::{self, SpectralAnalyzer};
-use mfm_noise::{NoiseBatch, NoiseError, NoiseKind, NoiseSampler, SpectrumReport};
+use mfm_noise::{KindName, NoiseBatch, NoiseError, NoiseKind, NoiseSampler, SpectrumReport};
 use proptest::prelude::*;
 
 /// `y = L x` from the CSC arrays (both triangles are stored).
@@ -294,6 +294,61 @@ proptest! {
         let tag = format!("\"kind\":\"{}\"", kind.name().replace('-', "_"));
         prop_assert!(json.contains(&tag), "{} lacks {}", json, tag);
     }
+
+    #[test]
+    fn the_long_form_gives_the_same_kind(kind in any_kind()) {
+        // every parameter spelled out
+        let (tau, c, k) = match kind {
+            NoiseKind::Naive | NoiseKind::White => (None, None, None),
+            NoiseKind::Matern { tau } => (Some(tau), None, None),
+            NoiseKind::MaternNormalized { c } => (None, Some(c), None),
+            NoiseKind::Explicit { k, tau } => (Some(tau), None, Some(k)),
+        };
+        prop_assert_eq!(NoiseKind::from_parts(kind.kind_name(), tau, c, k).unwrap(), kind);
+        // and every parameter the kind does not take refused by name
+        for (p, given) in [("tau", tau), ("c", c), ("k", k.map(|k| k as f64))] {
+            if given.is_some() {
+                continue;
+            }
+            let e = match p {
+                "tau" => NoiseKind::from_parts(kind.kind_name(), Some(1.0), c, k),
+                "c" => NoiseKind::from_parts(kind.kind_name(), tau, Some(1.0), k),
+                _ => NoiseKind::from_parts(kind.kind_name(), tau, c, Some(3)),
+            };
+            let accepted = match (p, kind.kind_name()) {
+                // parameters left at their defaults are accepted when given
+                ("tau", KindName::Matern | KindName::Explicit) => true,
+                ("c", KindName::MaternNormalized) => true,
+                ("k", KindName::Explicit) => true,
+                _ => false,
+            };
+            prop_assert_eq!(e.is_ok(), accepted, "{} given to {}", p, kind);
+            if let Err(e) = e {
+                prop_assert!(
+                    matches!(e, NoiseError::UnusedParameter { parameter, .. } if parameter == p),
+                    "{}", e
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn the_long_form_fills_in_defaults_and_validates() {
+    let d = |name| NoiseKind::from_parts(name, None, None, None).unwrap();
+    assert_eq!(d(KindName::Matern), "matern".parse().unwrap());
+    assert_eq!(d(KindName::Explicit), "explicit:64".parse().unwrap());
+    assert_eq!(
+        d(KindName::MaternNormalized),
+        NoiseKind::MaternNormalized { c: 1e-4 }
+    );
+    let e = NoiseKind::from_parts(KindName::Matern, Some(-1.0), None, None).unwrap_err();
+    assert!(
+        matches!(e, NoiseError::InvalidParameter { name: "tau", .. }),
+        "{e}"
+    );
+    let e = NoiseKind::from_parts(KindName::MaternNormalized, Some(5.0), None, None).unwrap_err();
+    assert!(e.to_string().contains("give c"), "{e}");
 }
 
 #[test]

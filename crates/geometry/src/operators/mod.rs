@@ -146,6 +146,11 @@ expected twice the area above f64::EPSILON * (longest edge)^2"
     },
 }
 
+/// One face's two rows of `G`, by corner: `[[gx0, gx1, gx2], [gy0, gy1,
+/// gy2]]`, the gradients of the face's three hat functions in its frame (see
+/// the [module docs](self); `gx2` is always zero).
+pub type FaceGradient = [[f64; 3]; 2];
+
 /// All intrinsic operators of a mesh, computed together so that the per-face
 /// work (edge lengths, areas, cotangents) and the per-vertex counts are shared.
 ///
@@ -161,6 +166,7 @@ expected twice the area above f64::EPSILON * (longest edge)^2"
 /// let (v, f) = (mesh.num_vertices(), mesh.num_faces());
 /// assert_eq!((ops.laplacian.nrows(), ops.gradient.nrows()), (v, 2 * f));
 /// assert_eq!(ops.face_areas_interleaved.len(), 2 * f);
+/// assert_eq!(ops.face_gradients.len(), f);
 /// assert!(ops.degenerate_faces.is_empty());
 /// ```
 #[derive(Clone, Debug)]
@@ -175,6 +181,13 @@ pub struct Operators {
     pub face_areas_interleaved: Vec<f64>,
     /// Intrinsic gradient `G`, `2F x V`, in the frame of the module docs.
     pub gradient: SparseColMat<usize, f64>,
+    /// `G` face by face, length `F`: `face_gradients[f][r][c]` is the entry
+    /// of row `2f + r` (`r = 0` the x, `1` the y component of the face
+    /// frame) in the column of corner `c` of face `f` (`faces[f][c]`), zero
+    /// for the x component of corner 2 and for degenerate faces. Equal, bit
+    /// for bit, to the entries of [`Operators::gradient`], which is this
+    /// table scattered into columns; code that edits one edits both.
+    pub face_gradients: Vec<FaceGradient>,
     /// Faces treated as degenerate (zero contribution to `L` and `G`); always
     /// empty for [`Operators::new`], sorted for [`Operators::new_lenient`].
     pub degenerate_faces: Vec<usize>,
@@ -202,9 +215,19 @@ impl Operators {
     }
 
     fn assemble(mesh: &TriMesh, data: &[FaceData], face_areas: Vec<f64>) -> Self {
-        let (assembled, face_areas_interleaved) = rayon::join(
+        let (assembled, (face_areas_interleaved, face_gradients)) = rayon::join(
             || assemble(mesh, data, &face_areas, Want::ALL),
-            || interleave(&face_areas),
+            || {
+                rayon::join(
+                    || interleave(&face_areas),
+                    || {
+                        data.par_iter()
+                            .with_min_len(FACE_CHUNK)
+                            .map(FaceData::gradient_rows)
+                            .collect()
+                    },
+                )
+            },
         );
         let degenerate_faces = data
             .par_iter()
@@ -224,6 +247,7 @@ impl Operators {
             face_areas,
             face_areas_interleaved,
             gradient: gradient.unwrap_or_else(|| unreachable_operator("G")),
+            face_gradients,
             degenerate_faces,
         }
     }
@@ -469,6 +493,13 @@ impl FaceData {
         let gy1 = -2.0 * self.half_cot[0] * self.inv_l2;
         // minus the other two, so G 1 = 0 up to one rounding per row
         ([-self.inv_l2, gy0], [self.inv_l2, gy1], -(gy0 + gy1))
+    }
+
+    /// The face's two rows of `G` by corner (see [`Operators::face_gradients`]).
+    #[inline]
+    fn gradient_rows(&self) -> FaceGradient {
+        let ([gx0, gy0], [gx1, gy1], gy2) = self.gradients();
+        [[gx0, gx1, 0.0], [gy0, gy1, gy2]]
     }
 }
 

@@ -3,9 +3,9 @@
 use tch::Tensor;
 use tch::nn;
 
-use crate::error::{Result, shape_error};
-use crate::mesh::MeshTensors;
-use crate::profile::section;
+use mfm_kernels::error::{Result, shape_error};
+use mfm_kernels::mesh::MeshTensors;
+use mfm_kernels::profile::section;
 
 use super::{Mlp, VectorMlp, dense, gelu};
 
@@ -77,7 +77,7 @@ impl PoissonBlock {
             ),
             None => (x.shallow_clone(), l1.ws.narrow(1, 0, w)),
         };
-        let pre = crate::kernels::dense::linear(&input, &a, l1.bs.as_ref())? + ub;
+        let pre = mfm_kernels::dense::linear(&input, &a, l1.bs.as_ref())? + ub;
         let x = x + &self.gamma1 * dense(&self.mlp1.l2, &gelu(&pre))?;
         let x = &x + &self.gamma2 * self.mlp2.forward(&x)?;
         Ok(x)

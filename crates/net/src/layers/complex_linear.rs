@@ -3,8 +3,8 @@
 use tch::Tensor;
 use tch::nn;
 
-use crate::error::{Result, shape_error};
-use crate::mesh::MeshTensors;
+use mfm_kernels::error::{Result, shape_error};
+use mfm_kernels::mesh::MeshTensors;
 
 /// Complex linear map `z -> W z` on face features, `W = W_re + i W_im`
 /// (`[C_out, C_in]` each, stored as one `[2, C_out, C_in]` variable, no bias).
@@ -30,9 +30,9 @@ impl ComplexLinear {
     }
 
     /// Applies the layer to `[B, 2F, C_in]`, giving `[B, 2F, C_out]`
-    /// ([`crate::kernels::dense::complex_linear`]: three real products per call).
+    /// ([`mfm_kernels::dense::complex_linear`]: three real products per call).
     pub fn forward(&self, g: &Tensor) -> Result<Tensor> {
-        crate::kernels::dense::complex_linear(g, &self.weight)
+        mfm_kernels::dense::complex_linear(g, &self.weight)
     }
 
     /// `divergence(forward(g))` computed on vertices:
@@ -70,6 +70,6 @@ impl ComplexLinear {
             }
             None => w,
         };
-        crate::kernels::dense::linear(&pq, &w, None)
+        mfm_kernels::dense::linear(&pq, &w, None)
     }
 }

@@ -1,6 +1,6 @@
 //! PoissonNet's layers, one file per kind (DESIGN.md section 5); the
 //! network that assembles them is [`crate::model`], the kernels they run on
-//! are [`crate::kernels`].
+//! are [`mfm_kernels`].
 //!
 //! - [`ComplexLinear`] (`complex_linear.rs`): `z -> W z` on face features;
 //! - [`VectorMlp`] (`vector_mlp.rs`): modulation, complex layers and the
@@ -24,7 +24,7 @@ pub use vector_mlp::VectorMlp;
 
 use tch::{Tensor, nn};
 
-use crate::error::Result;
+use mfm_kernels::error::Result;
 
 pub(crate) fn linear(p: nn::Path<'_>, input: usize, output: usize) -> nn::Linear {
     // PyTorch's default initialization of nn.Linear
@@ -43,9 +43,9 @@ pub(crate) fn linear(p: nn::Path<'_>, input: usize, output: usize) -> nn::Linear
     nn::linear(p, input as i64, output as i64, cfg)
 }
 
-/// Applies an `nn::Linear` through [`crate::kernels::dense::linear`].
+/// Applies an `nn::Linear` through [`mfm_kernels::dense::linear`].
 pub(crate) fn dense(l: &nn::Linear, x: &Tensor) -> Result<Tensor> {
-    crate::kernels::dense::linear(x, &l.ws, l.bs.as_ref())
+    mfm_kernels::dense::linear(x, &l.ws, l.bs.as_ref())
 }
 
 pub(crate) fn gelu(x: &Tensor) -> Tensor {

@@ -3,9 +3,9 @@
 use tch::Tensor;
 use tch::nn;
 
-use crate::error::{NetError, Result};
-use crate::mesh::MeshTensors;
-use crate::profile::section;
+use mfm_kernels::error::{NetError, Result};
+use mfm_kernels::mesh::MeshTensors;
+use mfm_kernels::profile::section;
 
 use super::{ComplexLinear, dense, gelu, linear};
 
@@ -98,17 +98,17 @@ impl VectorMlp {
             Some((l1, l2)) => {
                 let _s = section("vector.modulation");
                 // Linear1 commutes with the face mean (affine map, weights summing to 1)
-                let h = crate::profile::timed("vector.modulation.l1", || dense(l1, x))?;
+                let h = mfm_kernels::profile::timed("vector.modulation.l1", || dense(l1, x))?;
                 let s = gelu(&mesh.face_mean(&h)?);
-                let ps = crate::profile::timed("vector.modulation.l2", || dense(l2, &s))?;
+                let ps = mfm_kernels::profile::timed("vector.modulation.l2", || dense(l2, &s))?;
                 let _t = section("vector.modulation.apply");
-                crate::kernels::fused::modulate(g, &ps)?
+                mfm_kernels::fused::modulate(g, &ps)?
             }
             None => g.shallow_clone(),
         };
         let _s = section("vector.layers");
         for (layer, b) in rest.iter().zip(&self.biases) {
-            g = crate::kernels::fused::magnitude_gelu(&layer.forward(&g)?, b)?;
+            g = mfm_kernels::fused::magnitude_gelu(&layer.forward(&g)?, b)?;
         }
         Ok((g, last))
     }

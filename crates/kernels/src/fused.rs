@@ -18,9 +18,9 @@
 
 use tch::{Device, Kind, Tensor};
 
-use super::{Scalar, SyncPtr};
 use crate::autograd::{CustomFunction, apply_custom, parallel_for};
 use crate::error::{NetError, Result, backward_before_forward, shape_error};
+use crate::{Scalar, SyncPtr};
 
 /// `eps` inside the magnitude of the complex nonlinearity:
 /// `|z| = sqrt(re^2 + im^2 + eps)`.
@@ -486,11 +486,11 @@ pub fn magnitude_gelu(g: &Tensor, bias: &Tensor) -> Result<Tensor> {
 //
 // For f32 (the training type) each operation is one pass forward and one
 // backward, with the transcendental functions evaluated in the kernel by the
-// vectorizable approximations of `super::fastmath` (the loops compile twice,
+// vectorizable approximations of `crate::fastmath` (the loops compile twice,
 // with and without AVX2, chosen at run time). Nothing but the inputs is saved
 // for the backward pass, which recomputes the rest.
 
-use super::fastmath::{self, Fused, MulAdd, Separate};
+use crate::fastmath::{self, Fused, MulAdd, Separate};
 
 /// Defines `$name::<M>` (the kernel, generic over how the polynomials
 /// multiply-add) and `$avx`, the kernel compiled for AVX2 and FMA with fused

@@ -275,17 +275,17 @@ unsafe extern "C" fn drop_trampoline<F: CustomFunction>(state: *mut c_void) {
 ///
 /// # Example
 /// ```
-/// use mfm_net::autograd::{CustomFunction, apply_custom};
+/// use mfm_kernels::autograd::{CustomFunction, apply_custom};
 /// use tch::Tensor;
 ///
 /// /// y = 3 x, written by hand.
 /// struct Triple;
 /// impl CustomFunction for Triple {
 ///     fn name(&self) -> &str { "triple" }
-///     fn forward(&mut self, x: &[Tensor]) -> mfm_net::Result<Vec<Tensor>> {
+///     fn forward(&mut self, x: &[Tensor]) -> mfm_kernels::Result<Vec<Tensor>> {
 ///         Ok(vec![&x[0] * 3.0])
 ///     }
-///     fn backward(&mut self, g: &[Tensor]) -> mfm_net::Result<Vec<Option<Tensor>>> {
+///     fn backward(&mut self, g: &[Tensor]) -> mfm_kernels::Result<Vec<Option<Tensor>>> {
 ///         Ok(vec![Some(&g[0] * 3.0)])
 ///     }
 /// }
@@ -395,15 +395,15 @@ impl CustomFunction for LinearNode {
 /// # Example
 /// ```
 /// use std::sync::Arc;
-/// use mfm_net::autograd::{LinearOperator, apply_linear};
+/// use mfm_kernels::autograd::{LinearOperator, apply_linear};
 /// use tch::{Kind, Tensor};
 ///
 /// /// Cumulative sum (A) and reversed cumulative sum (A^T).
 /// struct CumSum;
 /// impl LinearOperator for CumSum {
 ///     fn name(&self) -> &str { "cumsum" }
-///     fn apply(&self, x: &Tensor) -> mfm_net::Result<Tensor> { Ok(x.cumsum(0, x.kind())) }
-///     fn apply_adjoint(&self, y: &Tensor) -> mfm_net::Result<Tensor> {
+///     fn apply(&self, x: &Tensor) -> mfm_kernels::Result<Tensor> { Ok(x.cumsum(0, x.kind())) }
+///     fn apply_adjoint(&self, y: &Tensor) -> mfm_kernels::Result<Tensor> {
 ///         Ok(y.flip([0]).cumsum(0, y.kind()).flip([0]))
 ///     }
 /// }

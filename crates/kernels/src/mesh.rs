@@ -39,7 +39,7 @@
 //! ## Example
 //! ```
 //! use mfm_geometry::procedural;
-//! use mfm_net::mesh::MeshTensors;
+//! use mfm_kernels::mesh::MeshTensors;
 //! use tch::{Kind, Tensor};
 //!
 //! let mesh = procedural::icosphere(2);
@@ -66,8 +66,8 @@ use tch::{Device, Kind, Tensor};
 
 use crate::autograd::{LinearOperator, apply_linear, parallel_for};
 use crate::error::{NetError, Result, shape_error};
-use crate::kernels::gather::{GatherKernel, GatherMode, Incidence};
-use crate::kernels::{Scalar, SyncPtr};
+use crate::gather::{GatherKernel, GatherMode, Incidence};
+use crate::{Scalar, SyncPtr};
 
 /// How the face/vertex operators (`G`, `G^T`, face means) are computed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -637,11 +637,15 @@ impl MeshTensors {
 
     /// Assembles the tensors from prebuilt operators and a factor of
     /// `L + eps I` for the same mesh (e.g. shared with other users of the
-    /// factor, or with a `G` in different face frames).
+    /// factor). `G` is read face by face from
+    /// [`Operators::face_gradients`] (so a `G` in other face frames is given
+    /// by rotating that table's rows); the sparse [`Operators::gradient`] is
+    /// not used.
+    ///
+    /// Cost: `O(V + F)` copies plus the connected components.
     ///
     /// Errors: [`NetError::Shape`] when the sizes of `faces`, the operators and
-    /// the factor disagree, or when `G` has an entry outside its face's
-    /// vertices.
+    /// the factor disagree.
     pub fn from_operators(
         faces: &[[u32; 3]],
         ops: &Operators,
@@ -654,11 +658,11 @@ impl MeshTensors {
             expected,
             found,
         };
-        if ops.gradient.nrows() != 2 * nf || ops.gradient.ncols() != nv {
+        if ops.face_gradients.len() != nf {
             return Err(bad(
-                "gradient operator G",
-                format!("[2F={}, V={nv}]", 2 * nf),
-                vec![ops.gradient.nrows() as i64, ops.gradient.ncols() as i64],
+                "per-face gradient rows of G",
+                format!("[F={nf}, 2, 3]"),
+                vec![ops.face_gradients.len() as i64, 2, 3],
             ));
         }
         if ops.face_areas_interleaved.len() != 2 * nf {
@@ -682,31 +686,14 @@ impl MeshTensors {
                 t.iter().map(|&i| i64::from(i)).collect(),
             ));
         }
-        // G coefficients per face corner
-        let mut g = vec![0.0f64; nf * 2 * 3];
-        let cp = ops.gradient.symbolic().col_ptr();
-        let ri = ops.gradient.symbolic().row_idx();
-        let val = ops.gradient.val();
-        for col in 0..nv {
-            for k in cp[col]..cp[col + 1] {
-                let (row, x) = (ri[k], val[k]);
-                let (f, r) = (row / 2, row % 2);
-                let Some(j) = faces[f].iter().position(|&i| i as usize == col) else {
-                    if x == 0.0 {
-                        continue;
-                    }
-                    return Err(bad(
-                        "gradient operator G",
-                        format!(
-                            "nonzeros of row {row} only in the columns of face {f} {:?}",
-                            faces[f]
-                        ),
-                        vec![row as i64, col as i64],
-                    ));
-                };
-                g[(f * 2 + r) * 3 + j] += x;
-            }
-        }
+        // G's coefficients per face corner, as geometry built them
+        let g: Vec<f64> = ops
+            .face_gradients
+            .iter()
+            .flatten()
+            .flatten()
+            .copied()
+            .collect();
         let a2 = &ops.face_areas_interleaved;
         let gw: Vec<f64> = g.iter().enumerate().map(|(i, &c)| c * a2[i / 3]).collect();
         // the same rows turned by a quarter turn in each face's frame:

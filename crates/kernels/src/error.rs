@@ -1,4 +1,4 @@
-//! Errors of the network crate.
+//! The one error type of the kernels and of the network (`mfm-net`).
 
 use std::path::PathBuf;
 
@@ -70,10 +70,12 @@ pub enum NetError {
     },
 }
 
-/// Result alias of this crate.
+/// Result alias of this crate and of `mfm-net`.
 pub type Result<T, E = NetError> = std::result::Result<T, E>;
 
-pub(crate) fn shape_error(
+/// A [`NetError::Shape`] naming `what`, the expected shape in words and
+/// `t`'s actual shape.
+pub fn shape_error(
     what: impl Into<String>,
     expected: impl Into<String>,
     t: &tch::Tensor,
@@ -87,7 +89,7 @@ pub(crate) fn shape_error(
 
 /// The error of a custom operation whose backward pass runs without the
 /// state its forward pass saves.
-pub(crate) fn backward_before_forward(op: &str) -> NetError {
+pub fn backward_before_forward(op: &str) -> NetError {
     NetError::CustomOp {
         op: op.to_owned(),
         message: "backward before forward".into(),

@@ -31,14 +31,14 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 use tch::{Device, Kind, Tensor};
 
-use super::predictor::{EigenPredictor, PredictorSpec, positions_tensor, prepared};
-use super::run::{Optimization, TrainReport};
-use super::sources::SourceSet;
-use super::{Schedule, finished_weights, read_json, same_config, to_own_frame};
-use crate::checkpoint::{NET_CONFIG_FILE, WEIGHTS_FILE};
-use crate::context::MeshContext;
-use crate::error::{FmError, Result};
-use crate::train::derived_rng;
+use crate::predictor::{EigenPredictor, PredictorSpec, positions_tensor, prepared};
+use crate::run::{Optimization, TrainReport};
+use crate::sources::SourceSet;
+use crate::{Schedule, finished_weights, read_json, same_config, to_own_frame};
+use mfm_fm::checkpoint::{NET_CONFIG_FILE, WEIGHTS_FILE};
+use mfm_fm::context::MeshContext;
+use mfm_fm::seeding::derived_rng;
+use mfm_fm::{FmError, Result};
 
 /// The flow run's description.
 pub const ARBITRARY_SPEC: &str = "arbitrary.json";
@@ -58,7 +58,7 @@ pub struct FlowConfig {
     /// Poisson blocks.
     pub blocks: usize,
     /// The noise of the source distribution (on each source).
-    #[serde(with = "crate::config::noise_kind_string")]
+    #[serde(with = "mfm_fm::config::noise_kind_string")]
     pub noise: NoiseKind,
     /// The noise amplitude `sigma`.
     pub sigma: f64,
@@ -219,7 +219,7 @@ pub fn train(
         ] {
             let (a, b) = (predictor_dir.join(from), run_dir.join(to));
             let bytes = std::fs::read(&a).map_err(|e| FmError::io(&a, e))?;
-            crate::checkpoint::write_atomic(&b, &bytes)?;
+            mfm_fm::checkpoint::write_atomic(&b, &bytes)?;
         }
         mfm_files::write_json(run_dir.join(PREDICTOR_COPY_SPEC), source.spec())?;
         mfm_files::write_json(

@@ -5,7 +5,7 @@
 //! are compiled twice, portable and for AVX2 + FMA, and chosen at run time.
 //! The operators that own the coefficients are in [`crate::mesh`].
 
-use super::{Scalar, SyncPtr};
+use crate::{Scalar, SyncPtr};
 
 /// Vertex -> incident (face, corner) lists, compressed.
 #[derive(Debug)]

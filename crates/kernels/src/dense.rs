@@ -25,14 +25,14 @@ use faer::{Accum, MatMut, MatRef, Par};
 use std::sync::atomic::{AtomicU64, Ordering};
 use tch::{Device, Kind, Tensor};
 
-use super::{Scalar, SyncPtr};
 use crate::autograd::{CustomFunction, apply_custom, parallel_for};
 use crate::error::{Result, backward_before_forward, shape_error};
+use crate::{Scalar, SyncPtr};
 
 /// Names of the dense layers' autograd nodes ([`linear`], [`complex_linear`]),
 /// so also of their profile sections `fn:<name>` and `fn:<name>^T`
 /// ([`crate::profile`]).
-pub(crate) const NODE_NAMES: [&str; 2] = [LINEAR_NODE, COMPLEX_LINEAR_NODE];
+pub const NODE_NAMES: [&str; 2] = [LINEAR_NODE, COMPLEX_LINEAR_NODE];
 const LINEAR_NODE: &str = "linear";
 const COMPLEX_LINEAR_NODE: &str = "complex_linear";
 
@@ -45,7 +45,7 @@ static PRODUCT_FLOPS: AtomicU64 = AtomicU64::new(0);
 /// counts `2 n k o`; Gauss's three-product form counts its three products).
 /// Products that fall back to torch (other devices and kinds) are not
 /// counted. For checking cost models such as
-/// [`crate::PoissonNetConfig::forward_product_flops`]: take the difference
+/// `mfm_net::PoissonNetConfig::forward_product_flops`: take the difference
 /// of two readings around the work, with nothing else running products.
 pub fn counted_product_flops() -> u64 {
     PRODUCT_FLOPS.load(Ordering::Relaxed)

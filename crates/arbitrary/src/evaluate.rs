@@ -41,8 +41,8 @@ use mfm_deform::{Arap, DeformParams, project};
 use mfm_geometry::TriMesh;
 use serde::{Deserialize, Serialize};
 
-use super::flow::ArbitrarySampler;
-use crate::error::{FmError, Result};
+use crate::flow::ArbitrarySampler;
+use mfm_fm::{FmError, Result};
 
 /// The measures of one held-out set; see the [module docs](self).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

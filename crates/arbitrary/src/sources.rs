@@ -10,8 +10,8 @@ use mfm_geometry::operators::cotangent_laplacian;
 use mfm_noise::NoiseKind;
 use mfm_solver::{ScreenedPoisson, SymbolicAnalysis};
 
-use crate::context::MeshContext;
-use crate::error::{FmError, Result};
+use mfm_fm::context::MeshContext;
+use mfm_fm::{FmError, Result};
 
 /// Per-source [`MeshContext`]s of shapes of one template (same faces).
 ///

@@ -1,5 +1,5 @@
 //! Link settings shared by the build scripts of every crate whose binaries or
-//! tests link libtorch (net, fm, cli): included with `#[path]`, since link
+//! tests link libtorch (kernels, net, fm, arbitrary, cli): included with `#[path]`, since link
 //! arguments printed by a build script reach only that package's own targets.
 
 use std::path::Path;

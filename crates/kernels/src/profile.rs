@@ -5,7 +5,7 @@
 //! [`section`] timers accumulate wall seconds, process CPU seconds (all
 //! threads; on a machine shared with other busy processes this is the
 //! steadier measure of the work) and call counts per name; the benchmark
-//! ([`crate::bench`]) turns it on to report where a training step spends its
+//! (`mfm_net::bench`) turns it on to report where a training step spends its
 //! time. On the CPU torch operations are synchronous, so a section's time is
 //! the time of its operations; on a GPU it only measures the launch unless
 //! the section synchronizes.

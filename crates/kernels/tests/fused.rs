@@ -6,10 +6,8 @@
 mod common;
 
 use common::{check_directional, randn, rel_max_diff};
-use mfm_net::kernels::dense::{complex_linear, complex_linear_reference, linear};
-use mfm_net::kernels::fused::{
-    magnitude_gelu, magnitude_gelu_reference, modulate, modulate_reference,
-};
+use mfm_kernels::dense::{complex_linear, complex_linear_reference, linear};
+use mfm_kernels::fused::{magnitude_gelu, magnitude_gelu_reference, modulate, modulate_reference};
 use tch::{Kind, Tensor};
 
 fn grads(f: &dyn Fn(&[Tensor]) -> Tensor, inputs: &[Tensor], w: &Tensor) -> (Tensor, Vec<Tensor>) {
@@ -105,7 +103,7 @@ fn faer_linear_matches_torch_linear_in_value_and_gradient() {
             // and one above FAER_WEIGHT_GRADIENT_MAX (torch's)
             for (rows, k, o) in [(1501, 7, 5), (301, 130, 70)] {
                 assert_eq!(
-                    k * o <= mfm_net::kernels::dense::FAER_WEIGHT_GRADIENT_MAX as i64,
+                    k * o <= mfm_kernels::dense::FAER_WEIGHT_GRADIENT_MAX as i64,
                     k == 7
                 );
                 let x = randn(&[3, rows, k]).to_kind(kind);
@@ -205,7 +203,7 @@ fn complex_linear_matches_the_four_product_form_in_value_and_gradient() {
                 assert!(rel_max_diff(&yb, &yc) < tol, "{kind:?} {k}x{o} reference");
                 // the dispatch: narrow layers are one `linear` product with
                 // the real matrix (bit for bit), wide ones are not
-                let gauss = k.min(o) >= mfm_net::kernels::dense::GAUSS_MIN_WIDTH;
+                let gauss = k.min(o) >= mfm_kernels::dense::GAUSS_MIN_WIDTH;
                 let yd = four_product_through_linear(&ins[0], &ins[1]);
                 assert_eq!(!ya.equal(&yd), gauss, "{kind:?} {k}x{o} path");
                 for (i, (a, b)) in ga.iter().zip(&gb).enumerate() {
@@ -254,7 +252,7 @@ fn parallel_for_runs_on_several_threads() {
     tch::set_num_threads(2);
     let seen = std::sync::Mutex::new(std::collections::HashSet::new());
     let covered = std::sync::atomic::AtomicUsize::new(0);
-    mfm_net::autograd::parallel_for(1000, 10, &|b, e| {
+    mfm_kernels::autograd::parallel_for(1000, 10, &|b, e| {
         seen.lock().unwrap().insert(std::thread::current().id());
         covered.fetch_add(e - b, std::sync::atomic::Ordering::Relaxed);
         // long enough that one thread cannot take every chunk

@@ -14,13 +14,14 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use mfm_net::{PoissonNet, PoissonNetConfig};
 use tch::Device;
 
-use super::Schedule;
-use crate::adam::Adam;
-use crate::checkpoint::{
+use crate::Schedule;
+use mfm_fm::adam::Adam;
+use mfm_fm::checkpoint::{
     self, CheckpointState, LOG_FILE, LogAccumulator, NET_CONFIG_FILE, OPTIMIZER_FILE, WEIGHTS_FILE,
 };
-use crate::error::{FmError, Result};
-use crate::train::{INIT_LOCK, LOG_HEADER, truncate_log};
+use mfm_fm::seeding::INIT_LOCK;
+use mfm_fm::train::{LOG_HEADER, truncate_log};
+use mfm_fm::{FmError, Result};
 
 /// Rows of the log: one per this many steps.
 const LOG_EVERY: u64 = 10;

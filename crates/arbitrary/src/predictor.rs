@@ -23,13 +23,13 @@ use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 use tch::{Device, Kind, Tensor};
 
-use super::run::{Optimization, TrainReport};
-use super::sources::SourceSet;
-use super::{
+use crate::run::{Optimization, TrainReport};
+use crate::sources::SourceSet;
+use crate::{
     AUGMENT_SCALE, AUGMENT_SHIFT, Schedule, finished_weights, read_json, same_config, to_own_frame,
 };
-use crate::error::{FmError, Result};
-use crate::train::derived_rng;
+use mfm_fm::seeding::derived_rng;
+use mfm_fm::{FmError, Result};
 
 /// The predictor run's description.
 pub const PREDICTOR_SPEC: &str = "predictor.json";

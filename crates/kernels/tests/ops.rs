@@ -9,7 +9,7 @@ use std::sync::Arc;
 use common::{check_directional, randn, rel_max_diff, scalar};
 use mfm_geometry::operators::Operators;
 use mfm_geometry::procedural;
-use mfm_net::mesh::{Backend, MeshTensors};
+use mfm_kernels::mesh::{Backend, MeshTensors};
 use tch::{Device, Kind, Tensor};
 
 fn sphere(level: u32) -> (mfm_geometry::TriMesh, MeshTensors) {

@@ -7,12 +7,12 @@
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
+use mfm_arbitrary::flow::{self, ArbitrarySampler, FlowConfig};
+use mfm_arbitrary::predictor::{self, EigenPredictor, PredictorConfig};
 use mfm_data::dataset::Dataset;
 use mfm_data::deformations::{self, DeformMeshes};
 use mfm_data::pairs::{self, PairSpace};
 use mfm_deform::ShapeFamily;
-use mfm_fm::arbitrary::flow::{self, ArbitrarySampler, FlowConfig};
-use mfm_fm::arbitrary::predictor::{self, EigenPredictor, PredictorConfig};
 use mfm_geometry::procedural;
 
 struct Toy {

@@ -41,8 +41,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::checkpoint::WEIGHTS_FILE;
-use crate::error::{FmError, Result};
+use mfm_fm::checkpoint::WEIGHTS_FILE;
+use mfm_fm::{FmError, Result};
 
 pub use run::TrainReport;
 
