@@ -138,8 +138,22 @@ impl KindArgs {
             KindName::Naive => mfm_noise::KindName::Naive,
             KindName::Explicit => mfm_noise::KindName::Explicit,
         };
-        // the library names the parameter (`k` is the flag --k-noise)
-        Ok(NoiseKind::from_parts(name, self.tau, self.c, self.k_noise)?)
+        NoiseKind::from_parts(name, self.tau, self.c, self.k_noise).map_err(|e| match e {
+            // the library names the parameter; the user typed its flag
+            mfm_noise::NoiseError::UnusedParameter {
+                kind,
+                parameter,
+                hint,
+            } => {
+                let flag = if parameter == "k" {
+                    "k-noise"
+                } else {
+                    parameter
+                };
+                anyhow::anyhow!("--{flag} does not apply to --kind {kind}{hint}")
+            }
+            e => e.into(),
+        })
     }
 }
 

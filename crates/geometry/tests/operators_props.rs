@@ -369,11 +369,11 @@ fn face_gradients_are_the_entries_of_g() {
     // a grid, and the same grid with one face collapsed (lenient operators
     // give it zero rows in both forms)
     let mesh = grid(5, 4, &[0.3; 30]);
-    check_face_gradients(&mesh, &Operators::new(&mesh).unwrap());
+    check_face_gradients(&mesh, &Operators::new(&mesh).expect("valid grid"));
     let mut positions = mesh.positions().to_vec();
     let t = mesh.faces()[7];
     positions[t[2] as usize] = positions[t[0] as usize];
-    let collapsed = mesh.with_positions(positions).unwrap();
+    let collapsed = mesh.with_positions(positions).expect("same vertex count");
     let lenient = Operators::new_lenient(&collapsed);
     assert!(!lenient.degenerate_faces.is_empty());
     assert_eq!(lenient.face_gradients[7], [[0.0; 3]; 2]);

@@ -216,20 +216,22 @@ fn failed_writes_leave_nothing_behind() {
 
 #[test]
 fn write_mesh_picks_the_format_by_extension_and_refuses_others() {
-    let dir = tempfile::tempdir().unwrap();
+    let dir = tempfile::tempdir().expect("tempdir");
     let mesh = procedural::icosphere(1);
     for name in ["a.obj", "b.PLY"] {
         let p = dir.path().join(name);
-        mfm_meshio::write_mesh(&p, &mesh).unwrap();
-        let back = mfm_meshio::read_mesh(&p).unwrap();
+        mfm_meshio::write_mesh(&p, &mesh).expect("written");
+        let back = mfm_meshio::read_mesh(&p).expect("readable");
         assert_eq!(bits(&back), bits(&mesh), "{name}");
         assert_eq!(back.faces(), mesh.faces(), "{name}");
     }
     // the OBJ writer's text, not PLY's binary
-    let obj = std::fs::read(dir.path().join("a.obj")).unwrap();
+    let obj = std::fs::read(dir.path().join("a.obj")).expect("obj");
     assert!(obj.iter().all(u8::is_ascii));
     for name in ["c.off", "noext"] {
-        let e = mfm_meshio::write_mesh(dir.path().join(name), &mesh).unwrap_err();
+        let Err(e) = mfm_meshio::write_mesh(dir.path().join(name), &mesh) else {
+            panic!("{name} was written");
+        };
         assert!(
             matches!(e.kind(), WriteErrorKind::UnsupportedExtension { .. }),
             "{e}"
