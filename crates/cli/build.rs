@@ -7,17 +7,12 @@
 mod libtorch_link;
 
 fn main() {
+    // declared in every build, so that one without the network does not
+    // rerun this script on every source change
     println!("cargo:rerun-if-env-changed=DEP_MFM_NET_LIBTORCH_LIB");
     if std::env::var_os("CARGO_FEATURE_NETWORK").is_none() {
         // built without the network: nothing links libtorch
         return;
     }
-    println!("cargo:rerun-if-changed=../kernels/libtorch_link.rs");
-    match std::env::var("DEP_MFM_NET_LIBTORCH_LIB") {
-        Ok(lib) => libtorch_link::emit_link_args(&lib),
-        Err(_) => panic!(
-            "mfm-net did not report its libtorch folder (DEP_MFM_NET_LIBTORCH_LIB); \
-             set LIBTORCH to the torch install (see `cargo xtask setup`)"
-        ),
-    }
+    libtorch_link::link_libtorch_of("MFM_NET", "mfm-net");
 }

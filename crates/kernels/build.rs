@@ -22,17 +22,9 @@ use std::path::PathBuf;
 mod libtorch_link;
 
 fn main() {
-    println!("cargo:rerun-if-env-changed=DEP_TCH_LIBTORCH_LIB");
     println!("cargo:rerun-if-env-changed=LIBTORCH_CXX11_ABI");
     println!("cargo:rerun-if-changed=csrc/mfm_autograd.cpp");
-    println!("cargo:rerun-if-changed=libtorch_link.rs");
-    let Ok(lib) = std::env::var("DEP_TCH_LIBTORCH_LIB") else {
-        panic!(
-            "torch-sys did not report its libtorch folder (DEP_TCH_LIBTORCH_LIB); \
-             set LIBTORCH to the torch install (see `cargo xtask setup`)"
-        );
-    };
-    libtorch_link::emit_link_args(&lib);
+    let lib = libtorch_link::link_libtorch_of("TCH", "torch-sys");
     println!("cargo:libtorch_lib={lib}");
 
     let root = PathBuf::from(&lib).join("..");

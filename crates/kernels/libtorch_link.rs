@@ -24,3 +24,24 @@ pub fn emit_link_args(lib: &str) {
         );
     }
 }
+
+/// The libtorch folder a dependency's build script reported as
+/// `DEP_<LINKS>_LIBTORCH_LIB` (`links` is that dependency's `links` key in
+/// upper case: `TCH` for torch-sys, `MFM_KERNELS`, `MFM_NET`), with
+/// [`emit_link_args`] already printed for it and the reruns declared.
+///
+/// Panics, naming `dependency` and the variable, when the variable is
+/// missing (libtorch was not found; `LIBTORCH` unset).
+pub fn link_libtorch_of(links: &str, dependency: &str) -> String {
+    let var = format!("DEP_{links}_LIBTORCH_LIB");
+    println!("cargo:rerun-if-env-changed={var}");
+    println!("cargo:rerun-if-changed=../kernels/libtorch_link.rs");
+    let Ok(lib) = std::env::var(&var) else {
+        panic!(
+            "{dependency} did not report its libtorch folder ({var}); \
+             set LIBTORCH to the torch install (see `cargo xtask setup`)"
+        );
+    };
+    emit_link_args(&lib);
+    lib
+}

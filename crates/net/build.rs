@@ -8,16 +8,6 @@
 mod libtorch_link;
 
 fn main() {
-    println!("cargo:rerun-if-env-changed=DEP_MFM_KERNELS_LIBTORCH_LIB");
-    println!("cargo:rerun-if-changed=../kernels/libtorch_link.rs");
-    match std::env::var("DEP_MFM_KERNELS_LIBTORCH_LIB") {
-        Ok(lib) => {
-            libtorch_link::emit_link_args(&lib);
-            println!("cargo:libtorch_lib={lib}");
-        }
-        Err(_) => panic!(
-            "mfm-kernels did not report its libtorch folder (DEP_MFM_KERNELS_LIBTORCH_LIB); \
-             set LIBTORCH to the torch install (see `cargo xtask setup`)"
-        ),
-    }
+    let lib = libtorch_link::link_libtorch_of("MFM_KERNELS", "mfm-kernels");
+    println!("cargo:libtorch_lib={lib}");
 }
