@@ -80,6 +80,40 @@ pub struct SetEvaluation {
     pub seconds_per_sample: f64,
 }
 
+impl SetEvaluation {
+    /// The measures on one line, spreads as ratios to the data's (what
+    /// `mfm eval-arbitrary` prints).
+    pub fn summary(&self) -> String {
+        let ratio = |a: f64, b: f64| a / b.max(f64::MIN_POSITIVE);
+        format!(
+            "{:>9} ({} vertices, {} sources x {}): projection {:.2e} [{:.2e}, {:.2e}] (floor {:.2e}), \
+             displacement ratio {:.2}, pose spread {:.2}/{:.2} of the data's, MMD {:.4}, COV {:.2}, \
+             predictor error {:.3} (vectors 1-8: {:.3})",
+            self.set,
+            self.vertices,
+            self.sources,
+            self.samples_per_source,
+            self.projection.median,
+            self.projection.q1,
+            self.projection.q3,
+            self.projection_floor.median,
+            self.displacement_ratio,
+            ratio(
+                self.pose_spread.rotation,
+                self.reference_pose_spread.rotation
+            ),
+            ratio(
+                self.pose_spread.translation,
+                self.reference_pose_spread.translation
+            ),
+            self.mmd,
+            self.cov,
+            self.predictor_error.median,
+            self.predictor_error_low.median
+        )
+    }
+}
+
 /// One source with its generated targets and a true other pose, for
 /// pictures.
 #[derive(Clone, Debug)]

@@ -33,6 +33,7 @@
 
 pub mod evaluate;
 pub mod flow;
+pub mod folders;
 pub mod predictor;
 mod run;
 pub mod sources;

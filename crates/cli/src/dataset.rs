@@ -1,20 +1,16 @@
 //! `mfm dataset gmm`, `mfm dataset deform` and `mfm dataset pairs`:
 //! training and reference sets written as dataset folders.
 
-use crate::mesh_arg::load_mesh_checked;
+use crate::mesh::load_mesh_checked;
 use crate::output::ensure_empty;
-use crate::pictures::save_grid;
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
-use mfm_data::SignalSource;
 use mfm_data::deformations::{self, DeformMeshes};
 use mfm_data::experiment::GmmMeshes;
 use mfm_data::gmm::{GenerateOptions, GmmConfig, GmmDistance};
-use mfm_data::layout::{self, DeformExperiment, GmmExperiment, PairsExperiment};
+use mfm_data::layout::{DeformExperiment, GmmExperiment, PairsExperiment};
 use mfm_data::pairs::PairSpace;
 use mfm_deform::ShapeFamily;
-use mfm_geometry::TriMesh;
-use mfm_render::{ColorRange, Panel};
 use std::path::{Path, PathBuf};
 
 /// `mfm dataset ...`.
@@ -207,10 +203,7 @@ fn dataset_pairs(a: PairsArgs) -> Result<()> {
     };
     ensure_empty(&a.out)?;
     let t0 = std::time::Instant::now();
-    let input = load_mesh_checked(&spec)?;
-    let undo = dataset_undo(&a.out, &PairsExperiment::ENTRIES)?;
-    let meshes = DeformMeshes::from_mesh(&input, a.coarse_faces)
-        .with_context(|| format!("preparing the meshes of {spec}"))?;
+    let meshes = deform_meshes(&spec, a.coarse_faces)?;
     let poses = deformations::space_for(
         &meshes.original,
         a.handles,
@@ -236,7 +229,7 @@ fn dataset_pairs(a: PairsArgs) -> Result<()> {
             m.num_faces()
         );
     }
-    let train = PairsExperiment {
+    PairsExperiment {
         meshes: &meshes,
         space: &space,
         source: &spec,
@@ -246,29 +239,6 @@ fn dataset_pairs(a: PairsArgs) -> Result<()> {
         progress: true,
     }
     .write(&a.out)?;
-    let preview = train.load_all()?;
-    // the poses of the first two shapes, a row each
-    let shown: Vec<(usize, TriMesh)> = (0..preview.len().min(2 * a.poses))
-        .map(|i| Ok((i, meshes.coarse.with_positions(preview.positions(i))?)))
-        .collect::<Result<_>>()?;
-    let panels: Vec<Panel<'_>> = shown
-        .iter()
-        .map(|(i, m)| {
-            Panel::new(
-                m,
-                None,
-                format!("shape {} pose {}", i / a.poses, i % a.poses),
-            )
-        })
-        .collect();
-    save_grid(
-        &panels,
-        a.poses,
-        "pairs: poses (columns) of body shapes (rows)",
-        ColorRange::Auto,
-        &a.out.join(layout::PREVIEW),
-    )?;
-    undo.keep();
     println!(
         "wrote {} ({} training shapes x {} poses = {} pairs, {} held-out shapes) in {:.1} s",
         a.out.display(),
@@ -281,6 +251,13 @@ fn dataset_pairs(a: PairsArgs) -> Result<()> {
     Ok(())
 }
 
+/// The normalized, coarse and evaluation meshes of the mesh `spec`.
+fn deform_meshes(spec: &str, coarse_faces: usize) -> Result<DeformMeshes> {
+    let input = load_mesh_checked(spec)?;
+    DeformMeshes::from_mesh(&input, coarse_faces)
+        .with_context(|| format!("preparing the meshes of {spec}"))
+}
+
 /// Runs `mfm dataset deform`.
 fn dataset_deform(a: DeformArgs) -> Result<()> {
     if a.n == 0 {
@@ -288,10 +265,7 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
     }
     ensure_empty(&a.out)?;
     let t0 = std::time::Instant::now();
-    let input = load_mesh_checked(&a.mesh)?;
-    let undo = dataset_undo(&a.out, &DeformExperiment::ENTRIES)?;
-    let meshes = DeformMeshes::from_mesh(&input, a.coarse_faces)
-        .with_context(|| format!("preparing the meshes of {}", a.mesh))?;
+    let meshes = deform_meshes(&a.mesh, a.coarse_faces)?;
     let space = deformations::space_for(
         &meshes.original,
         a.handles,
@@ -305,8 +279,12 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
         ("coarse", &meshes.coarse),
         ("eval", &meshes.eval),
     ] {
-        let regions = space.handles.regions(m)?;
-        let sizes: Vec<String> = regions.iter().map(|r| r.len().to_string()).collect();
+        let sizes: Vec<String> = space
+            .handles
+            .regions(m)?
+            .iter()
+            .map(|r| r.len().to_string())
+            .collect();
         println!(
             "{role:>8} mesh: {:>6} vertices, {:>6} faces; handle vertices (anchor first): {}",
             m.num_vertices(),
@@ -314,7 +292,7 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
             sizes.join(", ")
         );
     }
-    let train = DeformExperiment {
+    DeformExperiment {
         meshes: &meshes,
         space: &space,
         source: &a.mesh,
@@ -324,25 +302,6 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
         progress: true,
     }
     .write(&a.out)?;
-    let preview = train.load_all()?;
-    let shapes: Vec<TriMesh> = (0..preview.len().min(8))
-        .map(|i| meshes.coarse.with_positions(preview.positions(i)))
-        .collect::<Result<_, _>>()?;
-    let mut panels = vec![Panel::new(&meshes.coarse, None, "rest")];
-    panels.extend(
-        shapes
-            .iter()
-            .enumerate()
-            .map(|(i, m)| Panel::new(m, None, format!("shape {i}"))),
-    );
-    save_grid(
-        &panels,
-        3,
-        "deformation training shapes",
-        ColorRange::Auto,
-        &a.out.join(layout::PREVIEW),
-    )?;
-    undo.keep();
     println!(
         "wrote {} ({} training shapes, {} held out) in {:.1} s",
         a.out.display(),
@@ -355,15 +314,16 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
 
 /// Runs `mfm dataset gmm`.
 fn dataset_gmm(a: GmmArgs) -> Result<()> {
+    let distance = if a.euclidean {
+        GmmDistance::Euclidean
+    } else {
+        GmmDistance::Geodesic
+    };
     let config = GmmConfig {
         bumps: a.bumps,
         sigma: a.sigma,
         min_separation: a.min_separation,
-        distance: if a.euclidean {
-            GmmDistance::Euclidean
-        } else {
-            GmmDistance::Geodesic
-        },
+        distance,
         ..GmmConfig::default()
     };
     config.validate()?;
@@ -394,13 +354,12 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
         test_mesh.num_vertices(),
         test_mesh.num_faces()
     );
-    let undo = dataset_undo(&a.out, &GmmExperiment::ENTRIES)?;
     let t0 = std::time::Instant::now();
     let progress = GenerateOptions {
         progress_bar: true,
         on_progress: None,
     };
-    let train = GmmExperiment {
+    GmmExperiment {
         config: &config,
         train_mesh: &train_mesh,
         test_mesh: &test_mesh,
@@ -410,22 +369,6 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
         seed: a.seed,
     }
     .write(&a.out, &progress)?;
-    let preview = train.load_all()?;
-    let k = preview.len().min(8);
-    let values: Vec<Vec<f64>> = (0..k).map(|i| preview.channel(i, 0)).collect();
-    let panels: Vec<Panel<'_>> = values
-        .iter()
-        .enumerate()
-        .map(|(i, v)| Panel::new(&train_mesh, Some(v.as_slice()), format!("signal {i}")))
-        .collect();
-    save_grid(
-        &panels,
-        4,
-        "GMM training signals",
-        ColorRange::Auto,
-        &a.out.join(layout::PREVIEW),
-    )?;
-    undo.keep();
     println!(
         "wrote {} ({} training signals, {} reference) in {:.1} s",
         a.out.display(),
@@ -434,15 +377,4 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
         t0.elapsed().as_secs_f64()
     );
     Ok(())
-}
-
-/// Creates the (empty or missing) dataset folder `out` and records it and
-/// the entries a `mfm dataset` command writes there for removal on failure.
-fn dataset_undo(out: &Path, entries: &[&str]) -> Result<mfm_files::Undo> {
-    let mut undo = mfm_files::Undo::new();
-    undo.create_dir_all(out)?;
-    for e in entries {
-        undo.file(out.join(e));
-    }
-    Ok(undo)
 }

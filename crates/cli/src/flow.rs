@@ -1,23 +1,16 @@
 //! `mfm train` and `mfm sample`: the commands that run the network (built
 //! with the `network` feature).
 
-use crate::mesh_arg::{load_mesh_checked, mesh_path};
-use crate::output::{ensure_empty, prepare_outputs, write_json};
-use crate::pictures::save_grid;
+use crate::mesh::{load_mesh_checked, mesh_path};
+use crate::output::ensure_empty;
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use mfm_data::dataset::Dataset;
-use mfm_fm::SignalSource;
 use mfm_fm::checkpoint::CONFIG_FILE;
 use mfm_fm::config::{DeviceChoice, OdeMethod, RunConfig};
-use mfm_fm::sample::{
-    SAMPLE_FILES, SampleOptions, SampleRequest, SampleTiming, Sampler, is_sample_ply,
-    sample_ply_name,
-};
-use mfm_fm::train::Trainer;
-use mfm_geometry::TriMesh;
-use mfm_render::{ColorRange, Panel};
-use std::path::{Path, PathBuf};
+use mfm_fm::run_folder::{Overrides, RunFolder};
+use mfm_fm::sample::{SAMPLE_FILES, Sampler};
+use mfm_fm::sample_folder::{SampleFolder, run_sample_options};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -167,9 +160,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
     if a.predictor.is_some() || a.no_eigenvectors {
         bail!("--predictor and --no-eigenvectors are options of --mode arbitrary");
     }
-    // A fresh run that fails before its first checkpoint leaves nothing.
-    let mut fresh: Option<mfm_files::Undo> = None;
-    let mut trainer = if a.resume {
+    let run = if a.resume {
         if a.config.is_some() || a.preset.is_some() || a.noise.is_some() || a.seed.is_some() {
             bail!(
                 "--resume continues with the run's own {CONFIG_FILE}; drop --config/--preset/--noise/--seed"
@@ -181,121 +172,57 @@ pub fn train(a: TrainArgs) -> Result<()> {
                 a.out.display()
             );
         }
-        let stored = RunConfig::from_toml_file(a.out.join(CONFIG_FILE))
-            .with_context(|| format!("{} is not a run folder", a.out.display()))?;
-        let dir = match (a.dataset.as_deref(), &stored.dataset.path) {
-            (None, Some(p)) if !p.is_dir() => {
-                let found = mfm_fm::config::locate_dataset(p, &a.out).with_context(|| {
-                    format!(
-                        "the run's dataset {} is gone (moved?); pass --dataset DIR",
-                        p.display()
-                    )
-                })?;
-                eprintln!(
-                    "note: the run's dataset {} is not there; using {} (found beside the run folder)",
-                    p.display(),
-                    found.display()
-                );
-                found
-            }
-            (flag, _) => dataset_dir(flag, &stored)?,
-        };
-        let data = Dataset::open(&dir)?;
-        let mesh = data.mesh().clone();
-        let mut t = match a.device {
-            Some(d) => Trainer::resume_on(&a.out, &mesh, Arc::new(data), d)?,
-            None => Trainer::resume(&a.out, &mesh, Arc::new(data))?,
-        };
-        if let Some(r) = t.resumed() {
+        let run = RunFolder::resume(&a.out, a.dataset.as_deref(), a.device, a.steps)?;
+        if let Some(p) = &run.moved_from {
+            eprintln!(
+                "note: the run's dataset {} is not there; using {} (found beside the run folder)",
+                p.display(),
+                run.dataset.display()
+            );
+        }
+        if let Some(r) = run.trainer.resumed() {
             match &r.checkpoint {
                 Some(c) => println!("resuming from {} (step {})", c.display(), r.step),
                 None => println!("no checkpoint yet: starting over"),
             }
         }
-        if let Some(steps) = a.steps {
-            t.set_total_steps(steps)?;
-        }
-        t
+        run
     } else {
-        let mut config = match (&a.config, &a.preset) {
+        let config = match (&a.config, &a.preset) {
             (Some(path), _) => RunConfig::from_toml_file(path)?,
             (None, Some(name)) => RunConfig::preset(name)?,
             (None, None) => {
                 bail!("give --config run.toml or --preset cpu|cpu-deform|paper|paper-elastic")
             }
         };
-        if let Some(d) = &a.dataset {
-            config.dataset.path = Some(d.clone());
-        }
-        // stored absolute, so `--resume` works from any working directory
-        if let Some(p) = &config.dataset.path {
-            config.dataset.path = Some(
-                std::path::absolute(p).with_context(|| format!("dataset path {}", p.display()))?,
-            );
-        }
-        if let Some(s) = a.steps {
-            config.train.steps = s;
-        }
-        if let Some(s) = a.seed {
-            config.train.seed = s;
-        }
-        if let Some(k) = a.noise {
-            config.noise.kind = k;
-        }
-        if let Some(d) = a.device {
-            config.train.device = d;
-        }
-        let dir = dataset_dir(None, &config)?;
-        let data = Dataset::open(&dir)?;
-        let mesh = data.mesh().clone();
-        println!(
-            "dataset {}: {} signals, {} vertices, {} channels",
-            dir.display(),
-            data.len(),
-            data.num_vertices(),
-            data.channels()
-        );
+        let overrides = Overrides {
+            dataset: a.dataset.clone(),
+            steps: a.steps,
+            seed: a.seed,
+            noise: a.noise,
+            device: a.device,
+        };
         ensure_empty(&a.out)?;
-        let mut undo = mfm_files::Undo::new();
-        undo.create_dir_all(&a.out)?;
-        for f in [
-            CONFIG_FILE,
-            mfm_fm::checkpoint::FLOW_FILE,
-            mfm_fm::checkpoint::LOG_FILE,
-        ] {
-            undo.file(a.out.join(f));
-        }
-        let trainer = Trainer::new(&a.out, config, &mesh, Arc::new(data))?;
-        fresh = Some(undo);
-        trainer
+        let run = RunFolder::start(&a.out, overrides.apply(config)?)?;
+        let [n, v, c] = run.dataset_shape;
+        println!(
+            "dataset {}: {n} signals, {v} vertices, {c} channels",
+            run.dataset.display()
+        );
+        run
     };
+    let t = &run.trainer;
     println!(
         "training {} parameters on {:?}, step {} of {}",
-        trainer.net().num_parameters(),
-        trainer.device(),
-        trainer.step(),
-        trainer.config().train.steps
+        t.net().num_parameters(),
+        t.device(),
+        t.step(),
+        t.config().train.steps
     );
-    if let Some(line) = trainer.flow().frame_summary() {
+    if let Some(line) = t.flow().frame_summary() {
         println!("{line}");
     }
-    let summary = match trainer.run(&stop, !a.quiet) {
-        Ok(s) => s,
-        Err(e) => {
-            let has_checkpoint =
-                mfm_fm::checkpoint::list_checkpoints(&a.out).is_ok_and(|c| !c.is_empty());
-            if has_checkpoint {
-                // the checkpoints are the user's progress: keep the run
-                if let Some(u) = fresh.take() {
-                    u.keep();
-                }
-            }
-            return Err(e.into());
-        }
-    };
-    if let Some(u) = fresh.take() {
-        u.keep();
-    }
+    let summary = run.train(&stop, !a.quiet)?;
     println!(
         "steps {}..{} in {:.1} s ({:.3} s/step), last loss {}",
         summary.start_step,
@@ -319,16 +246,6 @@ pub fn train(a: TrainArgs) -> Result<()> {
         std::process::exit(130);
     }
     Ok(())
-}
-
-fn dataset_dir(flag: Option<&Path>, config: &RunConfig) -> Result<PathBuf> {
-    match (flag, &config.dataset.path) {
-        (Some(p), _) => Ok(p.to_path_buf()),
-        (None, Some(p)) => Ok(p.clone()),
-        (None, None) => {
-            bail!("no dataset: pass --dataset DIR or set [dataset] path in the configuration")
-        }
-    }
 }
 
 /// Runs `mfm sample`.
@@ -389,11 +306,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
             "warning: {mesh_arg}: {w}; the run's frame assumes the sampling mesh is the training surface in the dataset's units"
         );
     }
-    let run_config = RunConfig::from_toml_file(a.run.join(CONFIG_FILE)).ok();
-    let mut opts = run_config
-        .as_ref()
-        .map(|c| SampleOptions::from(&c.sample))
-        .unwrap_or_default();
+    let mut opts = run_sample_options(&a.run);
     if let Some(s) = a.steps {
         if s == 0 {
             bail!("--steps must be at least 1");
@@ -403,105 +316,24 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     if let Some(m) = a.method {
         opts.method = m;
     }
-    let (v, c) = (mesh.num_vertices(), sampler.flow().channels);
-    let n = a.n;
-    let plys = a.ply.min(n);
-    let mut outputs: Vec<PathBuf> = SAMPLE_FILES.iter().map(|f| a.out.join(f)).collect();
-    outputs.extend((0..plys).map(|i| a.out.join(sample_ply_name(i))));
-    let run_files = [
-        CONFIG_FILE,
-        mfm_fm::checkpoint::FLOW_FILE,
-        mfm_fm::checkpoint::WEIGHTS_FILE,
-        mfm_fm::checkpoint::NET_CONFIG_FILE,
-        mfm_fm::checkpoint::CHECKPOINTS_DIR,
-    ]
-    .map(|f| a.run.join(f));
-    let mut inputs: Vec<Option<&Path>> = run_files.iter().map(|p| Some(p.as_path())).collect();
-    inputs.push(mesh_path(mesh_arg));
-    let undo = prepare_outputs(&inputs, &outputs)?;
-    let shape = [n as u64, v as u64, c as u64];
-    mfm_files::space::ensure_space(
-        &a.out.join(SAMPLE_FILES[0]),
-        mfm_files::npy::file_bytes(&shape, 4),
-    )
-    .with_context(|| format!("{n} samples x {v} vertices x {c} channels of f32"))?;
-    // stale sample_NNN.ply of an earlier run (--force): removed, nothing else
-    for name in existing.iter().filter(|f| is_sample_ply(f)) {
-        let path = a.out.join(name);
-        if !outputs.contains(&path) {
-            std::fs::remove_file(&path)
-                .with_context(|| format!("cannot remove the stale {}", path.display()))?;
-        }
-    }
-    let target = sampler.prepare(&mesh)?;
-    let keep = n.min(a.ply.max(8));
-    let streamed = sampler
-        .sample_to_npy(
-            &target,
-            &outputs[0],
-            SampleRequest {
-                count: n,
-                seed: a.seed,
-                keep,
-                progress: true,
-            },
-            &opts,
-        )
-        .with_context(|| {
-            format!(
-                "sampling the model in {}; nothing was written",
-                a.run.display()
-            )
-        })?;
-    let (seconds, noise_seconds) = (streamed.seconds, streamed.noise_seconds);
-    let signals = streamed.first;
-    mfm_meshio::write_ply(a.out.join("mesh.ply"), &mesh, &[])?;
-    for i in 0..plys {
-        signals.write_ply(i, &mesh, &a.out.join(sample_ply_name(i)))?;
-    }
-    let k = keep.min(8);
-    let values: Vec<Vec<f64>> = (0..k).map(|i| signals.channel(i, 0)).collect();
-    let deformed: Vec<TriMesh> = if c == 3 {
-        (0..k)
-            .map(|i| mesh.with_positions(signals.positions(i)))
-            .collect::<Result<_, _>>()?
-    } else {
-        Vec::new()
+    let folder = SampleFolder {
+        run: &a.run,
+        mesh_file: mesh_path(mesh_arg),
+        out: &a.out,
+        count: a.n,
+        seed: a.seed,
+        ply: a.ply,
+        progress: true,
     };
-    let panels: Vec<Panel<'_>> = (0..k)
-        .map(|i| {
-            if c == 3 {
-                Panel::new(&deformed[i], None, format!("sample {i}"))
-            } else {
-                Panel::new(&mesh, Some(values[i].as_slice()), format!("sample {i}"))
-            }
-        })
-        .collect();
-    save_grid(
-        &panels,
-        4,
-        &format!("{n} samples on {} vertices", mesh.num_vertices()),
-        ColorRange::Auto,
-        &a.out.join("samples.png"),
-    )?;
-    let per_sample = seconds / n as f64;
-    let timing = SampleTiming {
-        samples: n,
-        vertices: v,
-        channels: c,
-        ode_steps: opts.steps,
-        method: format!("{:?}", opts.method).to_lowercase(),
-        seconds,
-        noise_seconds,
-        seconds_per_sample: per_sample,
-    };
-    write_json(&a.out.join(SAMPLE_FILES[3]), &timing)?;
-    undo.keep();
+    let t = folder
+        .write(&sampler, &mesh, &opts)
+        .with_context(|| format!("sampling the model in {}", a.run.display()))?;
     println!(
-        "{n} samples on {} vertices in {:.2} s ({:.1} ms per sample, {} {:?} steps) -> {}",
-        v,
-        seconds,
-        per_sample * 1e3,
+        "{} samples on {} vertices in {:.2} s ({:.1} ms per sample, {} {:?} steps) -> {}",
+        t.samples,
+        t.vertices,
+        t.seconds,
+        t.seconds_per_sample * 1e3,
         opts.steps,
         opts.method,
         a.out.display()

@@ -1,7 +1,7 @@
 //! `mfm net summary` and `mfm net bench`: the PoissonNet presets, their
 //! parameter tables, and their training-step and inference times on a mesh.
 
-use crate::mesh_arg::load_mesh;
+use crate::mesh::load_mesh;
 use anyhow::{Context, Result, bail};
 use clap::Subcommand;
 use mfm_fm::config::DeviceChoice;

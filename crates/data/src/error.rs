@@ -69,6 +69,15 @@ pub enum DataError {
     /// Noise sampling failed.
     #[error("noise: {0}")]
     Noise(#[from] mfm_noise::NoiseError),
+    /// A picture could not be drawn or written.
+    #[error(transparent)]
+    Render(#[from] mfm_render::RenderError),
+    /// Signals do not fit the mesh they are shown on.
+    #[error("mesh: {0}")]
+    Mesh(#[from] mfm_geometry::MeshError),
+    /// An output could not be written ([`mfm_files`]).
+    #[error(transparent)]
+    Files(#[from] mfm_files::FileError),
 }
 
 impl DataError {

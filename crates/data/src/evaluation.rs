@@ -23,8 +23,10 @@ use crate::deformations::{self, DeformManifest, Plausibility};
 use crate::error::{DataError, Result};
 use crate::gmm::{self, GmmConfig, GmmGenerator};
 use crate::metrics::Metrics;
+use crate::pictures;
 use crate::quality::{GmmQualityReport, ParamSpread, Quartiles};
 use crate::signals::{InMemorySignals, SignalSource};
+use std::path::Path;
 
 /// Generated shapes whose projections [`evaluate`] keeps for pictures.
 pub const PROJECTIONS_KEPT: usize = 4;
@@ -244,4 +246,171 @@ pub fn plausibility_only(
         vertices: mesh.num_vertices(),
     };
     Ok((report, p))
+}
+
+/// The files of `mfm eval` against a reference set: what it reads and
+/// what it writes.
+#[derive(Clone, Copy, Debug)]
+pub struct EvalFiles<'a> {
+    /// Generated samples, `.npy` `[N, V, C]` ([`InMemorySignals::read_npy`]).
+    pub samples: &'a Path,
+    /// The reference dataset folder (its mesh is the samples' mesh).
+    pub reference: &'a Path,
+    /// Where to write the [`EvalReport`] as JSON.
+    pub json: Option<&'a Path>,
+    /// Where to draw the pictures: for a deformation set the generated
+    /// shapes beside their projections ([`pictures::projections`]); else the
+    /// point-wise means ([`pictures::means`]) with `STEM_difference.png`
+    /// beside it, and for a GMM set also `STEM_samples.png`
+    /// ([`pictures::data_and_samples`]).
+    pub png: Option<&'a Path>,
+}
+
+impl EvalFiles<'_> {
+    /// Checks the outputs ([`mfm_files::Outputs`]), reads the samples
+    /// (which must be finite) and the reference set, [`evaluate`]s, and
+    /// writes the report and pictures; nothing is left behind on failure.
+    ///
+    /// # Errors
+    /// [`DataError::Format`] for non-finite samples, [`DataError::SizeMismatch`]
+    /// for samples not on the reference's mesh, and those of the readers,
+    /// [`evaluate`] and the writers.
+    pub fn run(&self) -> Result<Evaluation> {
+        let undo = guard(&[self.samples, self.reference], self.json, self.png)?;
+        let generated = read_finite(self.samples)?;
+        let reference = Dataset::open(self.reference)?;
+        let dir = self.reference.display();
+        if generated.num_vertices() != reference.num_vertices() {
+            return Err(DataError::format(
+                self.samples,
+                format!(
+                    "samples have {} vertices but the reference mesh ({dir}) has {}; \
+                     sample on the reference's mesh",
+                    generated.num_vertices(),
+                    reference.num_vertices()
+                ),
+            ));
+        }
+        if generated.channels() != reference.channels() {
+            return Err(DataError::format(
+                self.samples,
+                format!(
+                    "samples have {} channels but the reference set {dir} has {}",
+                    generated.channels(),
+                    reference.channels()
+                ),
+            ));
+        }
+        let e = evaluate(&reference, &generated)?;
+        if let Some(json) = self.json {
+            mfm_files::write_json(json, &e.report)?;
+        }
+        if let Some(png) = self.png {
+            if let Some(q) = &e.report.quality {
+                let samples = pictures::sibling_png(png, "samples");
+                pictures::data_and_samples(&e.mesh, &e.reference, &generated, q, &samples)?;
+            }
+            match &e.projections {
+                Some(p) => pictures::projections(&e.mesh, &generated, p, png)?,
+                None => pictures::means(
+                    &e.mesh,
+                    &generated,
+                    &e.reference,
+                    e.report.metrics.test_error,
+                    png,
+                    &pictures::sibling_png(png, "difference"),
+                )?,
+            }
+        }
+        undo.keep();
+        Ok(e)
+    }
+}
+
+/// The files of `mfm eval --space`: shapes judged against a deformation
+/// space alone.
+#[derive(Clone, Copy, Debug)]
+pub struct PlausibilityFiles<'a> {
+    /// Generated shapes, `.npy` `[N, V, 3]`.
+    pub samples: &'a Path,
+    /// `space.json` of a deformation experiment.
+    pub space: &'a Path,
+    /// The mesh the shapes move.
+    pub mesh: &'a TriMesh,
+    /// The mesh's file, `None` for a built-in mesh.
+    pub mesh_file: Option<&'a Path>,
+    /// Where to write the [`PlausibilityReport`] as JSON.
+    pub json: Option<&'a Path>,
+    /// Where to draw the first shapes beside their projections.
+    pub png: Option<&'a Path>,
+}
+
+impl PlausibilityFiles<'_> {
+    /// Checks the outputs, reads the shapes and the space, runs
+    /// [`plausibility_only`] and writes the report and picture.
+    ///
+    /// # Errors
+    /// As [`EvalFiles::run`], with [`plausibility_only`]'s.
+    pub fn run(&self) -> Result<PlausibilityReport> {
+        let mut inputs = vec![self.samples, self.space];
+        inputs.extend(self.mesh_file);
+        let undo = guard(&inputs, self.json, self.png)?;
+        let generated = read_finite(self.samples)?;
+        let v = self.mesh.num_vertices();
+        if generated.num_vertices() != v || generated.channels() != 3 {
+            return Err(DataError::format(
+                self.samples,
+                format!(
+                    "samples are [{}, {}, {}] but the mesh has {v} vertices (positions need 3 channels)",
+                    generated.len(),
+                    generated.num_vertices(),
+                    generated.channels()
+                ),
+            ));
+        }
+        let space = crate::layout::read_space(self.space)?;
+        let (report, p) = plausibility_only(&space, self.mesh, &generated)?;
+        if let Some(json) = self.json {
+            mfm_files::write_json(json, &report)?;
+        }
+        if let Some(png) = self.png {
+            pictures::projections(self.mesh, &generated, &p, png)?;
+        }
+        undo.keep();
+        Ok(report)
+    }
+}
+
+/// The output guard of an evaluation: the JSON, the picture and the two
+/// pictures beside it.
+fn guard(inputs: &[&Path], json: Option<&Path>, png: Option<&Path>) -> Result<mfm_files::Undo> {
+    let mut outputs = mfm_files::Outputs::new();
+    for i in inputs {
+        outputs = outputs.input(i);
+    }
+    for o in json.into_iter() {
+        outputs = outputs.output(o);
+    }
+    if let Some(png) = png {
+        outputs = outputs
+            .output(png)
+            .output(pictures::sibling_png(png, "samples"))
+            .output(pictures::sibling_png(png, "difference"));
+    }
+    Ok(outputs.prepare()?)
+}
+
+/// [`InMemorySignals::read_npy`], refusing a value that is not finite.
+fn read_finite(path: &Path) -> Result<InMemorySignals> {
+    let generated = InMemorySignals::read_npy(path)?;
+    if let Some((i, vertex, channel, x)) = generated.first_non_finite() {
+        return Err(DataError::format(
+            path,
+            format!(
+                "sample {i} is not finite ({x} at vertex {vertex}, channel {channel}); \
+                 metrics need finite samples"
+            ),
+        ));
+    }
+    Ok(generated)
 }

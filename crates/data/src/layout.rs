@@ -11,7 +11,7 @@
 //! | `original.ply`, `coarse.ply`, `eval.ply` | deform, pairs | the normalized input, training and evaluation meshes ([`DEFORM_MESHES`]) |
 //! | [`SPACE`] | deform | the deformation space ([`read_space`]) |
 //! | [`PAIR_SPACE`] | pairs | the shape and pose space of a pairs experiment ([`read_pair_space`]) |
-//! | [`PREVIEW`] | both (by the caller) | a picture of the first training signals |
+//! | [`PREVIEW`] | all | a picture of the first training signals ([`crate::pictures`]) |
 //!
 //! Held-out sets draw from [`held_out_seed`]`(seed)`, a different stream
 //! than the training set's `seed`, so they are not copies of training
@@ -54,6 +54,8 @@ use crate::deformations::{self, DeformMeshes};
 use crate::error::{DataError, Result};
 use crate::gmm::{GenerateOptions, GmmConfig, GmmGenerator};
 use crate::pairs::{self, PairSpace};
+use crate::pictures;
+use crate::signals::InMemorySignals;
 
 /// The training set's folder.
 pub const TRAIN: &str = "train";
@@ -96,20 +98,39 @@ pub struct GmmExperiment<'a> {
 }
 
 impl GmmExperiment<'_> {
-    /// What [`Self::write`] creates in its folder (and the caller's
-    /// [`PREVIEW`]), for cleaning up after a failure.
+    /// What [`Self::write`] creates in its folder.
     pub const ENTRIES: [&'static str; 4] = [TRAIN, REFERENCE, TEST_MESH, PREVIEW];
 
-    /// Generates and writes the experiment into `out` (which must exist);
-    /// returns the training set.
+    /// Generates and writes the experiment into `out` (missing or empty),
+    /// with [`PREVIEW`] of the first training signals; returns the training
+    /// set. On failure, what it created is removed.
     ///
     /// Cost: one [`GmmGenerator`] per mesh (a factorization for geodesic
     /// distances), then `O(V)` per signal.
     ///
     /// # Errors
+    /// [`mfm_files::FileError::NotEmpty`] for a folder with anything in it;
     /// [`DataError::Config`] for no training signals or invalid GMM
-    /// parameters; the generator's and the dataset writer's errors.
+    /// parameters; the generator's, the dataset writer's and the picture's
+    /// errors.
     pub fn write(&self, out: &Path, options: &GenerateOptions) -> Result<Dataset> {
+        fill(
+            out,
+            &Self::ENTRIES,
+            || self.write_sets(out, options),
+            |train, path| {
+                pictures::signals(
+                    self.train_mesh,
+                    train,
+                    "signal",
+                    "GMM training signals",
+                    path,
+                )
+            },
+        )
+    }
+
+    fn write_sets(&self, out: &Path, options: &GenerateOptions) -> Result<Dataset> {
         self.config.validate()?;
         if self.train == 0 {
             return Err(DataError::Config(
@@ -176,8 +197,7 @@ pub struct DeformExperiment<'a> {
 }
 
 impl DeformExperiment<'_> {
-    /// What [`Self::write`] creates in its folder (and the caller's
-    /// [`PREVIEW`]), for cleaning up after a failure.
+    /// What [`Self::write`] creates in its folder.
     pub const ENTRIES: [&'static str; 8] = [
         TRAIN,
         REFERENCE,
@@ -189,15 +209,25 @@ impl DeformExperiment<'_> {
         PREVIEW,
     ];
 
-    /// Writes the meshes, the space and the datasets into `out` (which must
-    /// exist); returns the training set.
+    /// Writes the meshes, the space, the datasets and [`PREVIEW`] (the rest
+    /// shape and the first training shapes) into `out` (missing or empty);
+    /// returns the training set. On failure, what it created is removed.
     ///
     /// Cost: one ARAP solve per shape, per mesh it is written on.
     ///
     /// # Errors
-    /// [`DataError::Config`] for no training shapes; the deformation and
-    /// writing errors.
+    /// [`mfm_files::FileError::NotEmpty`]; [`DataError::Config`] for no
+    /// training shapes; the deformation, writing and picture errors.
     pub fn write(&self, out: &Path) -> Result<Dataset> {
+        fill(
+            out,
+            &Self::ENTRIES,
+            || self.write_sets(out),
+            |train, path| pictures::deform_preview(&self.meshes.coarse, train, path),
+        )
+    }
+
+    fn write_sets(&self, out: &Path) -> Result<Dataset> {
         let m = self.meshes;
         for (file, mesh) in DEFORM_MESHES.iter().zip([&m.original, &m.coarse, &m.eval]) {
             mfm_meshio::write_ply(out.join(file), mesh, &[])?;
@@ -247,6 +277,23 @@ impl DeformExperiment<'_> {
         }
         Ok(train)
     }
+}
+
+/// Fills the experiment folder `out` (missing or empty) with `sets`, then
+/// draws `preview` of the training set to [`PREVIEW`]; on any failure the
+/// `entries` it created, and the folder if it created it, are removed.
+fn fill(
+    out: &Path,
+    entries: &[&str],
+    sets: impl FnOnce() -> Result<Dataset>,
+    preview: impl FnOnce(&InMemorySignals, &Path) -> Result<()>,
+) -> Result<Dataset> {
+    mfm_files::ensure_empty_dir(out)?;
+    let undo = mfm_files::Undo::folder(out, entries)?;
+    let train = sets()?;
+    preview(&train.load_all()?, &out.join(PREVIEW))?;
+    undo.keep();
+    Ok(train)
 }
 
 /// Writes a deformation space as pretty JSON ([`SPACE`]), atomically.
@@ -311,8 +358,7 @@ pub struct PairsExperiment<'a> {
 }
 
 impl PairsExperiment<'_> {
-    /// What [`Self::write`] creates in its folder (and the caller's
-    /// [`PREVIEW`]), for cleaning up after a failure.
+    /// What [`Self::write`] creates in its folder.
     pub const ENTRIES: [&'static str; 8] = [
         TRAIN,
         REFERENCE,
@@ -324,16 +370,33 @@ impl PairsExperiment<'_> {
         PREVIEW,
     ];
 
-    /// Writes the meshes, the space and the datasets into `out` (which must
-    /// exist); returns the training set.
+    /// Writes the meshes, the space, the datasets and [`PREVIEW`] (the poses
+    /// of the first two shapes) into `out` (missing or empty); returns the
+    /// training set. On failure, what it created is removed.
     ///
     /// Cost: per shape and mesh, one ARAP factorization and one solve per
     /// pose.
     ///
     /// # Errors
-    /// [`DataError::Config`] for no training shapes; the shape, pose and
-    /// writing errors.
+    /// [`mfm_files::FileError::NotEmpty`]; [`DataError::Config`] for no
+    /// training shapes; the shape, pose, writing and picture errors.
     pub fn write(&self, out: &Path) -> Result<Dataset> {
+        fill(
+            out,
+            &Self::ENTRIES,
+            || self.write_sets(out),
+            |train, path| {
+                pictures::pairs_preview(
+                    &self.meshes.coarse,
+                    train,
+                    self.space.poses_per_shape,
+                    path,
+                )
+            },
+        )
+    }
+
+    fn write_sets(&self, out: &Path) -> Result<Dataset> {
         let m = self.meshes;
         for (file, mesh) in DEFORM_MESHES.iter().zip([&m.original, &m.coarse, &m.eval]) {
             mfm_meshio::write_ply(out.join(file), mesh, &[])?;

@@ -21,6 +21,7 @@ pub mod gmm;
 pub mod layout;
 pub mod metrics;
 pub mod pairs;
+pub mod pictures;
 pub mod quality;
 pub mod signals;
 

@@ -118,6 +118,27 @@ impl InMemorySignals {
         })
     }
 
+    /// Reads a `.npy` array of shape `[N, V, C]` or `[N, V]` (one channel),
+    /// `f32` or `f64` (narrowed to `f32`), such as `mfm sample` writes.
+    ///
+    /// # Errors
+    /// The reader's [`DataError::Files`]; [`DataError::Format`] for any
+    /// other rank.
+    pub fn read_npy(path: &std::path::Path) -> Result<Self> {
+        let a = mfm_files::npy::read::<f32>(path)?;
+        let (n, v, c) = match a.shape[..] {
+            [n, v] => (n, v, 1),
+            [n, v, c] => (n, v, c),
+            _ => {
+                return Err(DataError::format(
+                    path,
+                    format!("expected shape [N, V] or [N, V, C], found {:?}", a.shape),
+                ));
+            }
+        };
+        Self::new(a.values, n, v, c)
+    }
+
     /// The first value that is NaN or infinite, as `(signal, vertex,
     /// channel, value)`, scanning in storage order; `None` when all are
     /// finite.

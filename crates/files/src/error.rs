@@ -72,6 +72,15 @@ pub enum FileError {
         /// Bytes free on its file system.
         available: u64,
     },
+    /// An output folder exists and is not empty.
+    #[error(
+        "{} exists and is not empty; choose another --out (nothing was overwritten)",
+        path.display()
+    )]
+    NotEmpty {
+        /// The folder as given.
+        path: PathBuf,
+    },
     /// A file's contents are not what was expected.
     #[error("{}: {message}", path.display())]
     Format {

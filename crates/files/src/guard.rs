@@ -10,6 +10,7 @@
 
 use crate::atomic::resolve_target;
 use crate::error::FileError;
+use crate::undo::Undo;
 use std::fs;
 use std::path::{Component, Path, PathBuf};
 
@@ -95,6 +96,42 @@ impl Outputs {
         }
         Ok(())
     }
+
+    /// [`Outputs::check`], then creates the outputs' folders and returns an
+    /// [`Undo`] that removes those folders and the output files the command
+    /// creates, unless it succeeds ([`Undo::keep`]). This is what a command
+    /// calls before it writes anything.
+    ///
+    /// # Errors
+    /// Those of [`Outputs::check`], and [`FileError::Io`] for a folder that
+    /// cannot be created.
+    pub fn prepare(&self) -> Result<Undo, FileError> {
+        self.check()?;
+        let mut undo = Undo::new();
+        for out in &self.outputs {
+            if let Some(dir) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+                undo.create_dir_all(dir)?;
+            }
+            undo.file(out);
+        }
+        Ok(undo)
+    }
+}
+
+/// Refuses a folder that exists and is not empty (a missing or empty one
+/// is fine): commands that fill a folder of their own call it first.
+///
+/// # Errors
+/// [`FileError::NotEmpty`].
+pub fn ensure_empty_dir(dir: &Path) -> Result<(), FileError> {
+    if let Ok(mut entries) = fs::read_dir(dir)
+        && entries.next().is_some()
+    {
+        return Err(FileError::NotEmpty {
+            path: dir.to_path_buf(),
+        });
+    }
+    Ok(())
 }
 
 /// What a path refers to.

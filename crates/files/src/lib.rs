@@ -12,7 +12,9 @@
 //!   anything: no output may be one of the command's inputs, lie inside an
 //!   input folder, or be another output of the same command.
 //! - [`undo`]: [`Undo`], which removes what a failed command created (and
-//!   only that).
+//!   only that); [`Outputs::prepare`] checks a command's outputs and returns
+//!   the [`Undo`] for them.
+//! - [`matrix_market`]: sparse matrices as Matrix Market coordinate files.
 //! - [`space`]: free space on the file system of a path.
 //! - [`npy`]: reading `.npy` arrays (shape checked against the file's length
 //!   before anything is allocated) and writing them, also in streamed
@@ -26,6 +28,7 @@
 pub mod atomic;
 pub mod error;
 pub mod guard;
+pub mod matrix_market;
 pub mod npy;
 pub mod space;
 pub mod text;
@@ -33,6 +36,6 @@ pub mod undo;
 
 pub use atomic::{AtomicFile, write_atomic, write_json};
 pub use error::FileError;
-pub use guard::Outputs;
+pub use guard::{Outputs, ensure_empty_dir};
 pub use text::fmt_f64;
 pub use undo::Undo;

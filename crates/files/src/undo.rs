@@ -65,6 +65,20 @@ impl Undo {
         }
     }
 
+    /// Creates the folder `dir` (see [`Undo::create_dir_all`]) and records
+    /// the `entries` a command writes into it.
+    ///
+    /// # Errors
+    /// [`FileError::Io`] naming the folder.
+    pub fn folder(dir: &Path, entries: &[&str]) -> Result<Self, FileError> {
+        let mut undo = Self::new();
+        undo.create_dir_all(dir)?;
+        for e in entries {
+            undo.file(dir.join(e));
+        }
+        Ok(undo)
+    }
+
     /// The command succeeded: keep everything.
     pub fn keep(mut self) {
         self.kept = true;

@@ -40,6 +40,10 @@ pub enum FmError {
     /// An invalid parameter or configuration value.
     #[error("invalid configuration: {0}")]
     Config(String),
+    /// A run folder cannot do what was asked (it holds no run, its dataset
+    /// is gone); the message says what to do instead.
+    #[error("{0}")]
+    RunFolder(String),
     /// A numerical breakdown: sampling whose state or network output stopped
     /// being finite, or a model whose weights are not finite.
     #[error("{0}")]

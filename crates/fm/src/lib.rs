@@ -13,12 +13,14 @@ pub mod checkpoint;
 pub mod config;
 pub mod context;
 pub mod error;
+pub mod run_folder;
 pub mod sample;
+pub mod sample_folder;
 pub mod seeding;
 pub mod train;
 
 pub use error::{FmError, Result};
 pub use mfm_data::{
     DataError, InMemorySignals, SignalSource, dataset, deformations, experiment, gmm, metrics,
-    quality, signals,
+    pictures, quality, signals,
 };

@@ -5,7 +5,9 @@
 //! Entry points: [`read_mesh`] (dispatch on the file extension),
 //! [`read_mesh_from_bytes`] (in-memory), [`read_mesh_with_scalars`] (also the
 //! per-vertex scalar properties of a PLY file), [`write_obj`], [`write_ply`]
-//! and [`write_ply_with`].
+//! and [`write_ply_with`]; [`spec`] names a mesh by one string (a file or
+//! `builtin:NAME[:N]`), as the command line does; [`export`] writes a
+//! mesh's operators and eigenpairs as files for other tools.
 //!
 //! ## Formats read
 //! | extension | parser | notes |
@@ -72,10 +74,12 @@
 //! std::fs::remove_dir_all(&dir).unwrap();
 //! ```
 
+pub mod export;
 mod gltf;
 mod obj;
 mod off;
 mod ply;
+pub mod spec;
 mod text;
 
 use mfm_files::fmt_f64;

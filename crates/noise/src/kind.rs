@@ -36,6 +36,15 @@ pub enum KindName {
 }
 
 impl KindName {
+    /// Every name, in the order the docs list them.
+    pub const ALL: [Self; 5] = [
+        Self::Matern,
+        Self::MaternNormalized,
+        Self::White,
+        Self::Naive,
+        Self::Explicit,
+    ];
+
     /// The name as the short form writes it (`matern-normalized`...).
     pub fn as_str(self) -> &'static str {
         match self {
@@ -45,6 +54,21 @@ impl KindName {
             Self::MaternNormalized => "matern-normalized",
             Self::Explicit => "explicit",
         }
+    }
+}
+
+impl FromStr for KindName {
+    type Err = NoiseError;
+
+    /// One of [`KindName::ALL`] as [`KindName::as_str`] writes it.
+    fn from_str(s: &str) -> Result<Self> {
+        Self::ALL
+            .into_iter()
+            .find(|k| k.as_str() == s)
+            .ok_or_else(|| NoiseError::ParseKind {
+                input: s.to_owned(),
+                reason: format!("expected one of {}", Self::ALL.map(Self::as_str).join(", ")),
+            })
     }
 }
 

@@ -560,6 +560,109 @@ pub struct MeshSpectrum {
     pub report: SpectrumReport,
 }
 
+/// What [`MeshSpectrum::measure`] draws and keeps.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SpectrumRequest {
+    /// Samples `0..samples` of the seed (at least 2).
+    pub samples: usize,
+    /// Eigenpairs (frequencies), at most the mesh's vertices.
+    pub k: usize,
+    /// The seed (the same sample indices on every mesh).
+    pub seed: u64,
+    /// Frequencies whose coefficients are returned (for histograms).
+    pub keep: Vec<usize>,
+}
+
+impl MeshSpectrum {
+    /// Streams one channel of samples of `sampler` (set up on `mesh`,
+    /// named `name`) through a [`SpectralAnalyzer`] on the `k` lowest
+    /// eigenpairs of `mesh` ([`eigenpairs`]) and reports against the
+    /// kind's [`Theory`]. Returns the spectrum and the coefficients of the
+    /// `keep` frequencies below `k` (in the order given, others left out);
+    /// `progress(done)` is called after each chunk.
+    ///
+    /// Cost: one eigensolve, then `O(samples (V k))`.
+    ///
+    /// # Errors
+    /// [`NoiseError::InvalidParameter`] for fewer than 2 samples or `k`
+    /// outside `1..=V`; operator, eigensolver and sampler errors.
+    pub fn measure(
+        name: &str,
+        mesh: &mfm_geometry::TriMesh,
+        sampler: &NoiseSampler,
+        request: &SpectrumRequest,
+        mut progress: impl FnMut(usize),
+    ) -> Result<(Self, Vec<(usize, Vec<f64>)>)> {
+        let v = mesh.num_vertices();
+        if request.samples < 2 || request.k == 0 || request.k > v {
+            return Err(NoiseError::InvalidParameter {
+                name: "samples, k",
+                expected: "at least 2 samples and 1..=V eigenpairs",
+                found: format!(
+                    "{} samples, k = {} on {v} vertices",
+                    request.samples, request.k
+                ),
+            });
+        }
+        let ops = mfm_geometry::operators::Operators::new(mesh)?;
+        let pairs = eigenpairs(&ops.laplacian, &ops.mass, request.k)?;
+        let theory = sampler.theory(&pairs)?;
+        let mut analyzer = SpectralAnalyzer::new(&pairs, &ops.mass)?.keep(&request.keep);
+        let (samples, seed) = (request.samples, request.seed);
+        crate::stream::for_each_chunk(
+            sampler,
+            samples,
+            1,
+            seed,
+            crate::stream::CHUNK,
+            |b, first| {
+                analyzer.add(b)?;
+                progress(first + b.samples());
+                Ok(())
+            },
+        )?;
+        let report = analyzer.report(Some(&theory))?;
+        let kept = request
+            .keep
+            .iter()
+            .filter_map(|&i| analyzer.coefficients(i).map(|c| (i, c.to_vec())))
+            .collect();
+        let spectrum = Self {
+            mesh: name.to_owned(),
+            vertices: v,
+            gamma: sampler.gamma(),
+            report,
+        };
+        Ok((spectrum, kept))
+    }
+}
+
+impl SpectrumFile {
+    /// The report of `meshes` (the first is the reference), with each later
+    /// mesh [`compare`]d with the first.
+    pub fn new(
+        kind: NoiseKind,
+        samples: usize,
+        k: usize,
+        seed: u64,
+        meshes: Vec<MeshSpectrum>,
+    ) -> Self {
+        let comparisons = meshes
+            .iter()
+            .skip(1)
+            .map(|m| compare(&meshes[0].report, &m.report))
+            .collect();
+        Self {
+            kind,
+            samples,
+            k,
+            seed,
+            meshes,
+            comparisons,
+        }
+    }
+}
+
 /// The report of `mfm spectrum`: one noise kind's spectrum on several
 /// meshes, each later mesh compared with the first.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

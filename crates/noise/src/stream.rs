@@ -115,3 +115,60 @@ pub fn write_npy(
         first_signal,
     })
 }
+
+/// The JSON [`write_npy_with_summary`] writes beside the samples.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct NoiseSummary {
+    /// The mesh as the user named it.
+    pub mesh: String,
+    /// The noise kind.
+    pub kind: crate::NoiseKind,
+    /// Samples written.
+    pub samples: usize,
+    /// Vertices of the mesh.
+    pub vertices: usize,
+    /// Channels per sample.
+    pub channels: usize,
+    /// The seed.
+    pub seed: u64,
+    /// `Gamma = ||M^-1 L||_F` of the mesh.
+    pub gamma: f64,
+    /// The screening weight used (`None` for kinds without one).
+    pub tau: Option<f64>,
+    /// The array layout of the `.npy`, in words.
+    pub layout: &'static str,
+    /// Mean energy `f^T M f` over samples and channels.
+    pub mean_energy: f64,
+}
+
+/// [`write_npy`], then a [`NoiseSummary`] of the file as pretty JSON at
+/// `json` (the mesh named `mesh` in it), atomically.
+///
+/// # Errors
+/// Those of [`write_npy`]; [`NoiseError::File`] for the summary.
+pub fn write_npy_with_summary(
+    sampler: &NoiseSampler,
+    mesh: &str,
+    path: &Path,
+    json: &Path,
+    samples: usize,
+    channels: usize,
+    seed: u64,
+    progress: impl FnMut(usize),
+) -> Result<(NoiseSummary, WrittenNoise)> {
+    let written = write_npy(sampler, path, samples, channels, seed, progress)?;
+    let summary = NoiseSummary {
+        mesh: mesh.to_owned(),
+        kind: sampler.kind(),
+        samples,
+        vertices: sampler.num_vertices(),
+        channels,
+        seed,
+        gamma: sampler.gamma(),
+        tau: sampler.tau(),
+        layout: "[samples, vertices, channels], row-major f64",
+        mean_energy: written.mean_energy,
+    };
+    mfm_files::write_json(json, &summary)?;
+    Ok((summary, written))
+}

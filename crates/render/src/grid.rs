@@ -9,7 +9,7 @@ use image::RgbImage;
 use super::camera::Camera;
 use super::colorbar::{colorbar_width, draw_colorbar};
 use super::text::{GLYPH, draw_text, text_height, text_width};
-use super::{RenderError, RenderOptions, check_scalars, render_with};
+use super::{ColorRange, RenderError, RenderOptions, check_scalars, render_with};
 use mfm_geometry::mesh::TriMesh;
 
 /// One cell of a grid: a mesh, optional per-vertex scalars and a caption.
@@ -370,4 +370,28 @@ mod tests {
         assert_eq!(fit_text("abc", 1, 8), (1, ".".to_string()));
         assert_eq!(fit_text("abc", 1, 0), (1, String::new()));
     }
+}
+
+/// Renders `panels` in a grid of `columns` under `title`, with one colour
+/// bar per panel on the colour scale `range`, and writes it as a PNG
+/// ([`crate::save_png`]): the one picture the mfm commands draw of a set of
+/// signals or shapes.
+///
+/// # Errors
+/// Those of [`render_grid`] and [`crate::save_png`].
+pub fn save_grid(
+    panels: &[Panel<'_>],
+    columns: usize,
+    title: &str,
+    range: ColorRange,
+    path: impl AsRef<std::path::Path>,
+) -> Result<(), RenderError> {
+    let mut opts = GridOptions {
+        title: Some(title.to_owned()),
+        ..GridOptions::default()
+    };
+    opts.panel.range = range;
+    opts.panel.colorbar = true;
+    let img = render_grid(panels, columns, &opts)?;
+    crate::save_png(&img, path)
 }

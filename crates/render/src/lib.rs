@@ -72,7 +72,7 @@ use thiserror::Error;
 pub use camera::{Camera, Projection, UpAxis, View};
 pub use colorbar::render_colorbar;
 pub use colormap::{ColorRange, Colormap};
-pub use grid::{GridLayout, GridOptions, Panel, grid_layout, render_grid};
+pub use grid::{GridLayout, GridOptions, Panel, grid_layout, render_grid, save_grid};
 pub use text::{GLYPH, draw_text, format_ticks, text_height, text_width};
 
 use mfm_geometry::mesh::TriMesh;

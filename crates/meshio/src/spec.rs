@@ -1,0 +1,252 @@
+//! Naming a mesh by one string, as a command line does: a file path, or a
+//! built-in procedural mesh `builtin:NAME[:N]`.
+//!
+//! `N` is a resolution parameter: subdivisions for `icosphere` (default 3)
+//! and `blob` (default 4, at most 8 for both), cells per side for `grid`
+//! (default 32, clamped to 1..=4096), and a resolution multiplier
+//! (default 1, clamped to 1..=64) for `uv-sphere`, `torus` and `capsule`.
+//!
+//! [`load_mesh_spec_checked`] is the policy of every command that computes
+//! on a mesh: the problems [`MeshReport`] finds are warnings, except
+//! duplicate faces, which every operator would count twice.
+//!
+//! # Example
+//! ```
+//! let mesh = mfm_meshio::spec::load_mesh_spec("builtin:icosphere:1").unwrap();
+//! assert_eq!(mesh.num_vertices(), 42);
+//! assert!(mfm_meshio::spec::spec_path("builtin:grid").is_none());
+//! let err = mfm_meshio::spec::load_mesh_spec("builtin:cube").unwrap_err();
+//! assert!(err.to_string().contains("unknown built-in mesh `cube`"));
+//! ```
+
+use crate::{ReadError, read_mesh};
+use mfm_geometry::TriMesh;
+use mfm_geometry::procedural::{self, ProceduralError};
+use mfm_geometry::validate::{MeshProblem, MeshReport};
+use std::path::Path;
+use thiserror::Error;
+
+/// Names accepted after `builtin:`.
+pub const BUILTINS: &[&str] = &["icosphere", "blob", "uv-sphere", "torus", "capsule", "grid"];
+
+/// The prefix of a built-in mesh's name.
+pub const BUILTIN_PREFIX: &str = "builtin:";
+
+/// Why a mesh named by a string could not be had. Every message starts
+/// with the string as given.
+#[derive(Debug, Error)]
+pub enum MeshSpecError {
+    /// The file could not be read.
+    #[error(transparent)]
+    Read(#[from] ReadError),
+    /// `builtin:NAME:N` with an `N` that is not a non-negative integer.
+    #[error("{spec}: resolution `{value}` is not a non-negative integer")]
+    BadResolution {
+        /// The name as given.
+        spec: String,
+        /// The text after the second colon.
+        value: String,
+    },
+    /// More subdivisions than [`MAX_SUBDIVISIONS`].
+    #[error("{spec}: at most 8 subdivisions (the mesh would have over 1.3M vertices)")]
+    TooFine {
+        /// The name as given.
+        spec: String,
+    },
+    /// A name after `builtin:` that is not in [`BUILTINS`].
+    #[error("{spec}: unknown built-in mesh `{name}` (known: {})", BUILTINS.join(", "))]
+    UnknownBuiltin {
+        /// The name as given.
+        spec: String,
+        /// The unknown mesh name.
+        name: String,
+    },
+    /// The procedural construction refused its parameters.
+    #[error("{spec}: {source}")]
+    Procedural {
+        /// The name as given.
+        spec: String,
+        /// Why.
+        #[source]
+        source: ProceduralError,
+    },
+    /// The mesh has duplicate faces, which every operator would count twice.
+    #[error(
+        "{spec}: {problem}; every operator would count their area twice: remove them first \
+(`mfm info {spec}` lists the mesh's problems)"
+    )]
+    DuplicateFaces {
+        /// The name as given.
+        spec: String,
+        /// The problem as [`MeshReport`] states it.
+        problem: MeshProblem,
+    },
+}
+
+/// Most subdivisions of `icosphere` and `blob`.
+pub const MAX_SUBDIVISIONS: u32 = 8;
+
+/// Loads the mesh `spec` names: a file ([`read_mesh`], by extension) or a
+/// built-in mesh (see the [module docs](self)).
+///
+/// # Errors
+/// [`MeshSpecError`], naming `spec`.
+pub fn load_mesh_spec(spec: &str) -> Result<TriMesh, MeshSpecError> {
+    let Some(rest) = spec.strip_prefix(BUILTIN_PREFIX) else {
+        return Ok(read_mesh(Path::new(spec))?);
+    };
+    let (name, param) = match rest.split_once(':') {
+        Some((n, p)) => {
+            let v: u32 = p.parse().map_err(|_| MeshSpecError::BadResolution {
+                spec: spec.to_owned(),
+                value: p.to_owned(),
+            })?;
+            (n, Some(v))
+        }
+        None => (rest, None),
+    };
+    let procedural = |r: Result<TriMesh, ProceduralError>| {
+        r.map_err(|source| MeshSpecError::Procedural {
+            spec: spec.to_owned(),
+            source,
+        })
+    };
+    let subdivisions = |default: u32| {
+        let s = param.unwrap_or(default);
+        if s > MAX_SUBDIVISIONS {
+            return Err(MeshSpecError::TooFine {
+                spec: spec.to_owned(),
+            });
+        }
+        Ok(s)
+    };
+    let multiplier = || param.unwrap_or(1).clamp(1, 64);
+    match name {
+        "icosphere" => Ok(procedural::icosphere(subdivisions(3)?)),
+        "blob" => procedural(procedural::blob(subdivisions(4)?)),
+        "uv-sphere" => {
+            let k = multiplier();
+            procedural(procedural::uv_sphere(24 * k, 48 * k))
+        }
+        "torus" => {
+            let k = multiplier();
+            procedural(procedural::torus(1.0, 0.4, 64 * k, 24 * k))
+        }
+        "capsule" => {
+            let k = multiplier();
+            procedural(procedural::capsule(0.5, 0.75, 16 * k, 48 * k))
+        }
+        "grid" => {
+            let n = param.unwrap_or(32).clamp(1, 4096);
+            procedural(procedural::plane_grid(n, n, 1.0, 1.0))
+        }
+        other => Err(MeshSpecError::UnknownBuiltin {
+            spec: spec.to_owned(),
+            name: other.to_owned(),
+        }),
+    }
+}
+
+/// The file `spec` names, `None` for a built-in mesh.
+pub fn spec_path(spec: &str) -> Option<&Path> {
+    (!spec.starts_with(BUILTIN_PREFIX)).then(|| Path::new(spec))
+}
+
+/// A mesh loaded for computing on, with the problems that did not stop it.
+#[derive(Clone, Debug)]
+pub struct CheckedMesh {
+    /// The mesh.
+    pub mesh: TriMesh,
+    /// What [`MeshReport`] found, every problem but duplicate faces.
+    pub warnings: Vec<MeshProblem>,
+}
+
+/// [`load_mesh_spec`] for computing on the mesh (operators, noise,
+/// datasets, sampling): duplicate faces are an error, the other problems
+/// [`MeshReport`] finds are returned as warnings.
+///
+/// # Errors
+/// Those of [`load_mesh_spec`], and [`MeshSpecError::DuplicateFaces`].
+pub fn load_mesh_spec_checked(spec: &str) -> Result<CheckedMesh, MeshSpecError> {
+    let mesh = load_mesh_spec(spec)?;
+    let warnings = check_mesh(spec, &mesh)?;
+    Ok(CheckedMesh { mesh, warnings })
+}
+
+/// The policy of [`load_mesh_spec_checked`] on a mesh already loaded: the
+/// warnings, or the duplicate faces as an error.
+///
+/// # Errors
+/// [`MeshSpecError::DuplicateFaces`].
+pub fn check_mesh(spec: &str, mesh: &TriMesh) -> Result<Vec<MeshProblem>, MeshSpecError> {
+    let report = MeshReport::new(mesh);
+    if let Some(p) = report
+        .problems
+        .iter()
+        .find(|p| matches!(p, MeshProblem::DuplicateFaces { .. }))
+    {
+        return Err(MeshSpecError::DuplicateFaces {
+            spec: spec.to_owned(),
+            problem: p.clone(),
+        });
+    }
+    Ok(report.problems)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn builtins_have_their_documented_resolutions() -> Result<(), MeshSpecError> {
+        assert_eq!(load_mesh_spec("builtin:icosphere")?.num_vertices(), 642);
+        assert_eq!(load_mesh_spec("builtin:icosphere:0")?.num_vertices(), 12);
+        assert_eq!(load_mesh_spec("builtin:grid:4")?.num_vertices(), 25);
+        assert_eq!(load_mesh_spec("builtin:grid:0")?.num_vertices(), 4);
+        assert_eq!(load_mesh_spec("builtin:blob")?.num_vertices(), 2562);
+        for name in BUILTINS {
+            let m = load_mesh_spec(&format!("builtin:{name}"))?;
+            assert!(m.num_faces() > 0, "{name}");
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn bad_names_are_refused_with_the_name() {
+        let e = load_mesh_spec("builtin:icosphere:9")
+            .map(|_| ())
+            .unwrap_err();
+        assert!(matches!(e, MeshSpecError::TooFine { .. }), "{e}");
+        let e = load_mesh_spec("builtin:grid:x").map(|_| ()).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "builtin:grid:x: resolution `x` is not a non-negative integer"
+        );
+        let e = load_mesh_spec("/nonexistent/m.off")
+            .map(|_| ())
+            .unwrap_err();
+        assert!(e.to_string().contains("/nonexistent/m.off"), "{e}");
+    }
+
+    #[test]
+    fn duplicate_faces_are_an_error_and_other_problems_warnings() {
+        let base = procedural::icosphere(1);
+        let mut faces = base.faces().to_vec();
+        let unused = base.positions().len();
+        let mut positions = base.positions().to_vec();
+        positions.push([5.0, 5.0, 5.0]);
+        let isolated = TriMesh::new(positions, faces.clone()).map(|m| check_mesh("iso", &m));
+        match isolated {
+            Ok(Ok(w)) => assert!(!w.is_empty(), "the unused vertex {unused} is reported"),
+            other => panic!("an unused vertex is only a warning: {other:?}"),
+        }
+        faces.push(faces[0]);
+        let dup = TriMesh::new(base.positions().to_vec(), faces).map(|m| check_mesh("dup", &m));
+        match dup {
+            Ok(Err(e @ MeshSpecError::DuplicateFaces { .. })) => {
+                assert!(e.to_string().starts_with("dup: "), "{e}")
+            }
+            other => panic!("duplicate faces are an error: {other:?}"),
+        }
+    }
+}
