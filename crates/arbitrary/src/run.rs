@@ -54,6 +54,21 @@ pub struct TrainReport {
     pub skipped_checkpoints: Vec<String>,
 }
 
+impl TrainReport {
+    /// The call on one line: steps of the total, seconds, last loss.
+    pub fn summary(&self) -> String {
+        format!(
+            "steps {}..{} of {} in {:.1} s, last loss {}",
+            self.start_step,
+            self.end_step,
+            self.total_steps,
+            self.seconds,
+            self.last_loss
+                .map_or_else(|| "-".to_owned(), |l| format!("{l:.5}"))
+        )
+    }
+}
+
 /// A network with its optimizer in a run folder.
 #[derive(Debug)]
 pub(crate) struct Optimization {

@@ -2,6 +2,7 @@
 //! `mfm eval-arbitrary` for an arbitrary-source run: the wiring around
 //! `mfm_arbitrary`.
 
+use crate::flow::{SampleArgs, TrainArgs};
 use crate::mesh::{load_mesh_checked, mesh_path};
 use anyhow::{Context, Result, bail};
 use mfm_arbitrary::flow::{ARBITRARY_SPEC, ArbitrarySampler};
@@ -9,6 +10,7 @@ use mfm_arbitrary::folders::{
     EvalFolder, FreshRun, RunKind, SampleFolder, TrainingRun, evaluate_experiment,
     write_sample_folder,
 };
+use mfm_fm::config::{DeviceChoice, OdeMethod};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
@@ -25,33 +27,19 @@ pub enum TrainMode {
     Arbitrary,
 }
 
-/// The options of `mfm train` these modes read.
-pub struct ArbitraryTrain<'a> {
-    pub mode: TrainMode,
-    pub preset: Option<&'a str>,
-    pub dataset: Option<&'a Path>,
-    pub predictor: Option<&'a Path>,
-    pub eigenvectors: bool,
-    pub out: &'a Path,
-    pub steps: Option<u64>,
-    pub seed: Option<u64>,
-    pub resume: bool,
-    pub quiet: bool,
-}
-
 /// Runs `mfm train --mode predictor|arbitrary`.
-pub fn train(a: ArbitraryTrain<'_>, stop: &AtomicBool) -> Result<()> {
+pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<()> {
     let kind = match a.mode {
         TrainMode::Predictor => RunKind::Predictor,
         TrainMode::Arbitrary => RunKind::Flow,
         TrainMode::Flow => unreachable!("the flow mode is `mfm train`'s own"),
     };
-    if kind == RunKind::Predictor && (a.predictor.is_some() || !a.eigenvectors) {
+    if kind == RunKind::Predictor && (a.predictor.is_some() || a.no_eigenvectors) {
         bail!("--predictor and --no-eigenvectors are options of --mode arbitrary");
     }
     let spec_file = kind.spec_file();
     let fresh = if a.resume {
-        if a.preset.is_some() || a.seed.is_some() || a.steps.is_some() || !a.eigenvectors {
+        if a.preset.is_some() || a.seed.is_some() || a.steps.is_some() || a.no_eigenvectors {
             bail!(
                 "--resume continues with the run's own {spec_file}; drop --preset/--seed/--steps/--no-eigenvectors"
             );
@@ -64,46 +52,36 @@ pub fn train(a: ArbitraryTrain<'_>, stop: &AtomicBool) -> Result<()> {
         }
         None
     } else {
-        let need = |p: Option<&Path>, flag: &str| {
-            p.map(Path::to_path_buf)
+        let need = |p: &Option<PathBuf>, flag: &str| {
+            p.clone()
                 .with_context(|| format!("this mode needs {flag} DIR"))
         };
         Some(FreshRun {
-            preset: a.preset.unwrap_or("cpu").to_owned(),
+            preset: a.preset.clone().unwrap_or_else(|| "cpu".to_owned()),
             steps: a.steps,
             seed: a.seed,
-            dataset: need(a.dataset, "--dataset")?,
+            dataset: need(&a.dataset, "--dataset")?,
             predictor: match kind {
-                RunKind::Flow => Some(need(a.predictor, "--predictor")?),
+                RunKind::Flow => Some(need(&a.predictor, "--predictor")?),
                 RunKind::Predictor => None,
             },
-            eigenvectors: a.eigenvectors,
+            eigenvectors: !a.no_eigenvectors,
         })
     };
-    let run = TrainingRun::prepare(kind, a.out, fresh.as_ref())?;
+    let run = TrainingRun::prepare(kind, &a.out, fresh.as_ref())?;
     println!("{}", run.description());
     let report = run.train(stop, !a.quiet)?;
     for s in &report.skipped_checkpoints {
         eprintln!("warning: passed over a damaged checkpoint: {s}");
     }
-    println!(
-        "steps {}..{} of {} in {:.1} s, last loss {}",
-        report.start_step,
-        report.end_step,
-        report.total_steps,
-        report.seconds,
-        report
-            .last_loss
-            .map_or_else(|| "-".to_owned(), |l| format!("{l:.5}"))
-    );
+    println!("{}", report.summary());
     match &report.model {
         Some(m) => println!("final model: {}", m.display()),
         None => println!(
             "stopped; continue with --resume --mode {} --out {}",
-            if kind == RunKind::Predictor {
-                "predictor"
-            } else {
-                "arbitrary"
+            match kind {
+                RunKind::Predictor => "predictor",
+                RunKind::Flow => "arbitrary",
             },
             a.out.display()
         ),
@@ -119,22 +97,22 @@ pub fn is_arbitrary_run(run: &Path) -> bool {
     run.join(ARBITRARY_SPEC).is_file()
 }
 
-/// The options of `mfm sample` an arbitrary-source run reads.
-pub struct ArbitrarySample<'a> {
-    pub run: &'a Path,
-    pub source: &'a str,
-    pub n: usize,
-    pub steps: Option<usize>,
-    pub seed: u64,
-    pub out: &'a Path,
-    pub ply: usize,
-}
-
 /// Runs `mfm sample --run ARBITRARY_RUN --source MESH`
 /// ([`mfm_arbitrary::folders::write_sample_folder`]).
-pub fn sample(a: &ArbitrarySample<'_>) -> Result<()> {
-    let mesh = load_mesh_checked(a.source)?;
-    let mut sampler = ArbitrarySampler::load(a.run)?;
+pub fn sample(a: &SampleArgs) -> Result<()> {
+    if a.method.is_some_and(|m| m != OdeMethod::Midpoint) {
+        bail!("an arbitrary-source run integrates with the midpoint rule only");
+    }
+    if a.device == DeviceChoice::Cuda {
+        bail!("an arbitrary-source run samples on the CPU (drop --device cuda)");
+    }
+    let source = a
+        .source
+        .as_deref()
+        .or(a.mesh.as_deref())
+        .unwrap_or_default();
+    let mesh = load_mesh_checked(source)?;
+    let mut sampler = ArbitrarySampler::load(&a.run)?;
     if let Some(s) = a.steps {
         if s == 0 {
             bail!("--steps must be at least 1");
@@ -142,10 +120,10 @@ pub fn sample(a: &ArbitrarySample<'_>) -> Result<()> {
         sampler.set_ode_steps(s);
     }
     let folder = SampleFolder {
-        run: a.run,
-        source_name: a.source,
-        source_file: mesh_path(a.source),
-        out: a.out,
+        run: &a.run,
+        source_name: source,
+        source_file: mesh_path(source),
+        out: &a.out,
         count: a.n,
         seed: a.seed,
         ply: a.ply,

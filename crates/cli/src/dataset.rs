@@ -10,7 +10,7 @@ use mfm_data::experiment::GmmMeshes;
 use mfm_data::gmm::{GenerateOptions, GmmConfig, GmmDistance};
 use mfm_data::layout::{DeformExperiment, GmmExperiment, PairsExperiment};
 use mfm_data::pairs::PairSpace;
-use mfm_deform::ShapeFamily;
+use mfm_deform::{DeformSpace, ShapeFamily};
 use std::path::{Path, PathBuf};
 
 /// `mfm dataset ...`.
@@ -48,6 +48,44 @@ pub enum DatasetCommand {
     Pairs(PairsArgs),
 }
 
+/// What `mfm dataset deform` and `mfm dataset pairs` share: the pose
+/// handles, the training mesh's size and the seed.
+#[derive(Args)]
+pub struct PoseArgs {
+    /// Moving pose handles (the anchor comes on top).
+    #[arg(long, default_value_t = 5)]
+    handles: usize,
+    /// Handle radius as a fraction of the bounding-box diagonal.
+    #[arg(long, default_value_t = 0.08)]
+    radius: f64,
+    /// Largest handle rotation, in radians.
+    #[arg(long, default_value_t = 0.5)]
+    max_angle: f64,
+    /// Largest handle translation, as a fraction of the bounding-box diagonal.
+    #[arg(long, default_value_t = 0.12)]
+    max_shift: f64,
+    /// Faces of the coarse training mesh.
+    #[arg(long, default_value_t = 3000)]
+    coarse_faces: usize,
+    /// Seed (held-out shapes use their own stream of the same seed).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+impl PoseArgs {
+    /// The normalized, coarse and evaluation meshes of the mesh `spec`,
+    /// with the pose space on the normalized one.
+    fn meshes_and_space(&self, spec: &str) -> Result<(DeformMeshes, DeformSpace)> {
+        let input = load_mesh_checked(spec)?;
+        let meshes = DeformMeshes::from_mesh(&input, self.coarse_faces)
+            .with_context(|| format!("preparing the meshes of {spec}"))?;
+        let (h, r, a, s) = (self.handles, self.radius, self.max_angle, self.max_shift);
+        let space = deformations::space_for(&meshes.original, h, r, a, s)
+            .with_context(|| format!("placing {h} handles on {spec}"))?;
+        Ok((meshes, space))
+    }
+}
+
 /// Arguments of `mfm dataset pairs`.
 #[derive(Args)]
 pub struct PairsArgs {
@@ -78,24 +116,8 @@ pub struct PairsArgs {
     /// Largest log-scale of the whole shape along an axis.
     #[arg(long, default_value_t = mfm_deform::shape::DEFAULT_MAX_GLOBAL)]
     max_global_scale: f64,
-    /// Moving pose handles (the anchor comes on top).
-    #[arg(long, default_value_t = 5)]
-    handles: usize,
-    /// Pose handle radius as a fraction of the bounding-box diagonal.
-    #[arg(long, default_value_t = 0.08)]
-    radius: f64,
-    /// Largest handle rotation, in radians.
-    #[arg(long, default_value_t = 0.5)]
-    max_angle: f64,
-    /// Largest handle translation, as a fraction of the bounding-box diagonal.
-    #[arg(long, default_value_t = 0.12)]
-    max_shift: f64,
-    /// Faces of the coarse training mesh.
-    #[arg(long, default_value_t = 3000)]
-    coarse_faces: usize,
-    /// Seed (held-out shapes use their own stream of the same seed).
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
+    #[command(flatten)]
+    pose: PoseArgs,
 }
 
 /// The template `mfm dataset pairs` uses without `--mesh`.
@@ -118,24 +140,8 @@ pub struct DeformArgs {
     /// parameters on the coarse mesh).
     #[arg(long, default_value_t = 100)]
     reference: usize,
-    /// Moving handles (the anchor comes on top).
-    #[arg(long, default_value_t = 5)]
-    handles: usize,
-    /// Handle radius as a fraction of the bounding-box diagonal.
-    #[arg(long, default_value_t = 0.08)]
-    radius: f64,
-    /// Largest handle rotation, in radians.
-    #[arg(long, default_value_t = 0.5)]
-    max_angle: f64,
-    /// Largest handle translation, as a fraction of the bounding-box diagonal.
-    #[arg(long, default_value_t = 0.12)]
-    max_shift: f64,
-    /// Faces of the coarse training mesh.
-    #[arg(long, default_value_t = 3000)]
-    coarse_faces: usize,
-    /// Seed (held-out shapes use their own stream of the same seed).
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
+    #[command(flatten)]
+    pose: PoseArgs,
 }
 
 /// Arguments of `mfm dataset gmm`.
@@ -185,6 +191,33 @@ pub fn dataset(cmd: DatasetCommand) -> Result<()> {
     }
 }
 
+/// Prints the vertex and face counts of the experiment's meshes.
+fn print_meshes(meshes: &DeformMeshes, space: Option<&DeformSpace>) -> Result<()> {
+    let all = [
+        ("original", &meshes.original),
+        ("coarse", &meshes.coarse),
+        ("eval", &meshes.eval),
+    ];
+    for (role, m) in &all[usize::from(space.is_none())..] {
+        let (v, f) = (m.num_vertices(), m.num_faces());
+        let Some(space) = space else {
+            println!("{role:>8} mesh: {v:>6} vertices, {f:>6} faces");
+            continue;
+        };
+        let sizes: Vec<String> = space
+            .handles
+            .regions(m)?
+            .iter()
+            .map(|r| r.len().to_string())
+            .collect();
+        println!(
+            "{role:>8} mesh: {v:>6} vertices, {f:>6} faces; handle vertices (anchor first): {}",
+            sizes.join(", ")
+        );
+    }
+    Ok(())
+}
+
 /// Runs `mfm dataset pairs`.
 fn dataset_pairs(a: PairsArgs) -> Result<()> {
     if a.shapes == 0 {
@@ -203,15 +236,7 @@ fn dataset_pairs(a: PairsArgs) -> Result<()> {
     };
     ensure_empty(&a.out)?;
     let t0 = std::time::Instant::now();
-    let meshes = deform_meshes(&spec, a.coarse_faces)?;
-    let poses = deformations::space_for(
-        &meshes.original,
-        a.handles,
-        a.radius,
-        a.max_angle,
-        a.max_shift,
-    )
-    .with_context(|| format!("placing {} pose handles on {spec}", a.handles))?;
+    let (meshes, poses) = a.pose.meshes_and_space(&spec)?;
     let mut family = ShapeFamily::auto(&meshes.original, a.regions)
         .with_context(|| format!("placing {} shape regions on {spec}", a.regions))?;
     family.max_region = a.max_region_scale;
@@ -222,20 +247,14 @@ fn dataset_pairs(a: PairsArgs) -> Result<()> {
         poses_per_shape: a.poses,
     };
     space.validate()?;
-    for (role, m) in [("coarse", &meshes.coarse), ("eval", &meshes.eval)] {
-        println!(
-            "{role:>8} mesh: {:>6} vertices, {:>6} faces",
-            m.num_vertices(),
-            m.num_faces()
-        );
-    }
+    print_meshes(&meshes, None)?;
     PairsExperiment {
         meshes: &meshes,
         space: &space,
         source: &spec,
         train: a.shapes,
         reference: a.reference,
-        seed: a.seed,
+        seed: a.pose.seed,
         progress: true,
     }
     .write(&a.out)?;
@@ -251,13 +270,6 @@ fn dataset_pairs(a: PairsArgs) -> Result<()> {
     Ok(())
 }
 
-/// The normalized, coarse and evaluation meshes of the mesh `spec`.
-fn deform_meshes(spec: &str, coarse_faces: usize) -> Result<DeformMeshes> {
-    let input = load_mesh_checked(spec)?;
-    DeformMeshes::from_mesh(&input, coarse_faces)
-        .with_context(|| format!("preparing the meshes of {spec}"))
-}
-
 /// Runs `mfm dataset deform`.
 fn dataset_deform(a: DeformArgs) -> Result<()> {
     if a.n == 0 {
@@ -265,40 +277,15 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
     }
     ensure_empty(&a.out)?;
     let t0 = std::time::Instant::now();
-    let meshes = deform_meshes(&a.mesh, a.coarse_faces)?;
-    let space = deformations::space_for(
-        &meshes.original,
-        a.handles,
-        a.radius,
-        a.max_angle,
-        a.max_shift,
-    )
-    .with_context(|| format!("placing {} handles on {}", a.handles, a.mesh))?;
-    for (role, m) in [
-        ("original", &meshes.original),
-        ("coarse", &meshes.coarse),
-        ("eval", &meshes.eval),
-    ] {
-        let sizes: Vec<String> = space
-            .handles
-            .regions(m)?
-            .iter()
-            .map(|r| r.len().to_string())
-            .collect();
-        println!(
-            "{role:>8} mesh: {:>6} vertices, {:>6} faces; handle vertices (anchor first): {}",
-            m.num_vertices(),
-            m.num_faces(),
-            sizes.join(", ")
-        );
-    }
+    let (meshes, space) = a.pose.meshes_and_space(&a.mesh)?;
+    print_meshes(&meshes, Some(&space))?;
     DeformExperiment {
         meshes: &meshes,
         space: &space,
         source: &a.mesh,
         train: a.n,
         reference: a.reference,
-        seed: a.seed,
+        seed: a.pose.seed,
         progress: true,
     }
     .write(&a.out)?;

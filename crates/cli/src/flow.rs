@@ -9,7 +9,7 @@ use mfm_fm::checkpoint::CONFIG_FILE;
 use mfm_fm::config::{DeviceChoice, OdeMethod, RunConfig};
 use mfm_fm::run_folder::{Overrides, RunFolder};
 use mfm_fm::sample::{SAMPLE_FILES, Sampler};
-use mfm_fm::sample_folder::{SampleFolder, run_sample_options};
+use mfm_fm::sample_folder::{SampleFolder, check_output_folder, run_sample_options};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -20,7 +20,7 @@ pub struct TrainArgs {
     /// Run configuration (TOML; every field has a default, unknown fields
     /// are an error). Without it, --preset gives the configuration.
     #[arg(long, conflicts_with = "preset")]
-    config: Option<PathBuf>,
+    pub(crate) config: Option<PathBuf>,
     /// Named configuration: `cpu` (scalar signals, minutes on a laptop),
     /// `cpu-deform` (`cpu` conditioned on the source xyz, for `mfm dataset
     /// deform` data), `paper` (the authors' human-pose recipe, for a GPU) or
@@ -28,47 +28,47 @@ pub struct TrainArgs {
     /// predictor or arbitrary: `cpu` (default) or `paper` (the official
     /// arbitrary-source configurations).
     #[arg(long)]
-    preset: Option<String>,
+    pub(crate) preset: Option<String>,
     /// What to train: flow (one mesh, the default), predictor (the
     /// arbitrary-source model's eigenvector predictor, on OUT/train of
     /// `mfm dataset pairs`) or arbitrary (the arbitrary-source flow, on the
     /// same dataset, with --predictor).
     #[arg(long, value_enum, default_value = "flow")]
-    mode: crate::arbitrary::TrainMode,
+    pub(crate) mode: crate::arbitrary::TrainMode,
     /// The finished predictor run the arbitrary-source flow conditions on
     /// (--mode arbitrary).
     #[arg(long)]
-    predictor: Option<PathBuf>,
+    pub(crate) predictor: Option<PathBuf>,
     /// --mode arbitrary without the predicted eigenvectors (zeros in their
     /// conditioning channels): an ablation of the positional encoding.
     #[arg(long)]
-    no_eigenvectors: bool,
+    pub(crate) no_eigenvectors: bool,
     /// Dataset folder (overrides the configuration's dataset.path).
     #[arg(long)]
-    dataset: Option<PathBuf>,
+    pub(crate) dataset: Option<PathBuf>,
     /// Run folder: config, log, checkpoints, final model.
     #[arg(long)]
-    out: PathBuf,
+    pub(crate) out: PathBuf,
     /// Total training steps (overrides train.steps).
     #[arg(long)]
-    steps: Option<u64>,
+    pub(crate) steps: Option<u64>,
     /// Seed (overrides train.seed).
     #[arg(long)]
-    seed: Option<u64>,
+    pub(crate) seed: Option<u64>,
     /// Noise the flow starts from (overrides noise.kind): matern:TAU,
     /// matern-normalized:C, white, naive, explicit:K:TAU.
     #[arg(long)]
-    noise: Option<mfm_noise::NoiseKind>,
+    pub(crate) noise: Option<mfm_noise::NoiseKind>,
     /// Where to train: auto (a GPU when libtorch sees one), cpu or cuda
     /// (overrides train.device; with --resume, continues the run there).
     #[arg(long)]
-    pub device: Option<DeviceChoice>,
+    pub(crate) device: Option<DeviceChoice>,
     /// Continue the run in --out from its newest valid checkpoint.
     #[arg(long)]
-    resume: bool,
+    pub(crate) resume: bool,
     /// No progress bar.
     #[arg(long)]
-    quiet: bool,
+    pub(crate) quiet: bool,
 }
 
 /// Arguments of `mfm sample`.
@@ -77,43 +77,43 @@ pub struct SampleArgs {
     /// Run folder written by `mfm train` (its final model, or its newest
     /// checkpoint).
     #[arg(long)]
-    run: PathBuf,
+    pub(crate) run: PathBuf,
     /// Mesh to generate on: any triangulation of the training surface.
     #[arg(long, required_unless_present = "source", conflicts_with = "source")]
-    mesh: Option<String>,
+    pub(crate) mesh: Option<String>,
     /// Source mesh of an arbitrary-source run (`mfm train --mode
     /// arbitrary`): any mesh of a shape like the template's, of any
     /// triangulation; targets are generated over it.
     #[arg(long)]
-    source: Option<String>,
+    pub(crate) source: Option<String>,
     /// Number of samples.
     #[arg(long, default_value_t = 16)]
-    n: usize,
+    pub(crate) n: usize,
     /// ODE steps (default: the run's sample.steps).
     #[arg(long)]
-    steps: Option<usize>,
+    pub(crate) steps: Option<usize>,
     /// Integrator: midpoint or euler (default: the run's).
     #[arg(long)]
-    method: Option<OdeMethod>,
+    pub(crate) method: Option<OdeMethod>,
     /// Where to run the network: auto (a GPU when libtorch sees one), cpu
     /// or cuda. Samples agree across devices up to round-off.
     #[arg(long, default_value = "auto")]
-    device: DeviceChoice,
+    pub(crate) device: DeviceChoice,
     /// Seed of the initial noise.
     #[arg(long, default_value_t = 0)]
-    seed: u64,
+    pub(crate) seed: u64,
     /// Output folder: samples.npy [N, V, C] (f32), mesh.ply, the first
     /// --ply samples as PLY, samples.png, timing.json.
     #[arg(long)]
-    out: PathBuf,
+    pub(crate) out: PathBuf,
     /// How many samples to also write as PLY files.
     #[arg(long, default_value_t = 4)]
-    ply: usize,
+    pub(crate) ply: usize,
     /// Write into a non-empty --out folder: replaces only what `mfm sample`
     /// writes (samples.npy, mesh.ply, samples.png, timing.json,
     /// sample_NNN.ply, stale ones of an earlier run included).
     #[arg(long)]
-    force: bool,
+    pub(crate) force: bool,
 }
 
 /// Runs `mfm train`.
@@ -141,21 +141,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
         if a.config.is_some() || a.noise.is_some() || a.device.is_some() {
             bail!("--config, --noise and --device are options of --mode flow");
         }
-        return crate::arbitrary::train(
-            crate::arbitrary::ArbitraryTrain {
-                mode: a.mode,
-                preset: a.preset.as_deref(),
-                dataset: a.dataset.as_deref(),
-                predictor: a.predictor.as_deref(),
-                eigenvectors: !a.no_eigenvectors,
-                out: &a.out,
-                steps: a.steps,
-                seed: a.seed,
-                resume: a.resume,
-                quiet: a.quiet,
-            },
-            &stop,
-        );
+        return crate::arbitrary::train(&a, &stop);
     }
     if a.predictor.is_some() || a.no_eigenvectors {
         bail!("--predictor and --no-eigenvectors are options of --mode arbitrary");
@@ -223,16 +209,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
         println!("{line}");
     }
     let summary = run.train(&stop, !a.quiet)?;
-    println!(
-        "steps {}..{} in {:.1} s ({:.3} s/step), last loss {}",
-        summary.start_step,
-        summary.end_step,
-        summary.seconds,
-        summary.seconds_per_step,
-        summary
-            .last_loss
-            .map_or_else(|| "-".to_owned(), |l| format!("{l:.5}"))
-    );
+    println!("{}", summary.line());
     if let Some(m) = &summary.model {
         println!("final model: {}", m.display());
     } else if let Some(c) = &summary.checkpoint {
@@ -253,45 +230,9 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     if a.n == 0 {
         bail!("--n must be at least 1");
     }
-    if a.out.exists() && !a.out.is_dir() {
-        bail!("--out {}: exists and is not a folder", a.out.display());
-    }
-    let existing: Vec<String> = std::fs::read_dir(&a.out)
-        .map(|d| {
-            d.filter_map(|e| e.ok())
-                .map(|e| e.file_name().to_string_lossy().into_owned())
-                .collect()
-        })
-        .unwrap_or_default();
-    if !existing.is_empty() && !a.force {
-        bail!(
-            "{} exists and is not empty; choose another --out, or add --force to replace what \
-`mfm sample` writes there ({}, sample_NNN.ply; nothing else is touched)",
-            a.out.display(),
-            SAMPLE_FILES.join(", ")
-        );
-    }
+    check_output_folder(&a.out, a.force, &SAMPLE_FILES)?;
     if crate::arbitrary::is_arbitrary_run(&a.run) {
-        if a.method.is_some_and(|m| m != OdeMethod::Midpoint) {
-            bail!("an arbitrary-source run integrates with the midpoint rule only");
-        }
-        if a.device == DeviceChoice::Cuda {
-            bail!("an arbitrary-source run samples on the CPU (drop --device cuda)");
-        }
-        let source = a
-            .source
-            .as_deref()
-            .or(a.mesh.as_deref())
-            .unwrap_or_default();
-        return crate::arbitrary::sample(&crate::arbitrary::ArbitrarySample {
-            run: &a.run,
-            source,
-            n: a.n,
-            steps: a.steps,
-            seed: a.seed,
-            out: &a.out,
-            ply: a.ply,
-        });
+        return crate::arbitrary::sample(&a);
     }
     let Some(mesh_arg) = a.mesh.as_deref() else {
         bail!(

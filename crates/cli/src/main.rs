@@ -58,4 +58,3 @@ fn parse() -> Cli {
     let matches = negatives(Cli::command()).get_matches();
     Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit())
 }
-

@@ -87,7 +87,7 @@ impl ConvertArgs {
     /// Writes the mesh by the output's extension.
     pub fn run(self) -> Result<()> {
         let mesh = load_mesh(&self.mesh)?;
-        let undo = prepare_outputs(&[mesh_path(&self.mesh)], &[self.out.clone()])?;
+        let undo = prepare_outputs(&[mesh_path(&self.mesh)], std::slice::from_ref(&self.out))?;
         mfm_meshio::write_mesh(&self.out, &mesh)?;
         undo.keep();
         println!(

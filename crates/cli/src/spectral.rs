@@ -139,7 +139,7 @@ pub struct NoiseArgs {
 
 impl NoiseArgs {
     /// `[N, V, C]` noise samples as `.npy` (f64) with a JSON summary beside
-    /// it ([`stream::write_npy_with_summary`]), and optionally a PNG of the
+    /// it ([`stream::NoiseFiles`]), and optionally a PNG of the
     /// first sample's first channel.
     pub fn run(self) -> Result<()> {
         let (spec, samples, channels, seed) = (&self.mesh, self.samples, self.channels, self.seed);
@@ -172,16 +172,15 @@ impl NoiseArgs {
             .with_context(|| format!("{spec}: cannot set up {kind} noise"))?;
         let setup = start.elapsed().as_secs_f64();
         let bar = progress(samples as u64, "sampling");
-        let (summary, written) = stream::write_npy_with_summary(
-            &sampler,
-            spec,
-            out,
-            &json,
+        let files = stream::NoiseFiles {
+            mesh: spec,
+            npy: out,
+            json: &json,
             samples,
             channels,
             seed,
-            |done| bar.set_position(done as u64),
-        )?;
+        };
+        let (summary, written) = files.write(&sampler, |done| bar.set_position(done as u64))?;
         bar.finish_and_clear();
         println!(
             "{samples} x {channels} {kind} samples on {spec} ({v} vertices; setup {setup:.3} s, total {:.3} s); \

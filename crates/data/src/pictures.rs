@@ -227,6 +227,7 @@ fn pointwise_mean(s: &InMemorySignals) -> Vec<f64> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
     use mfm_geometry::procedural;

@@ -75,6 +75,7 @@ pub fn write(path: &Path, m: CscView<'_>, comment: &str) -> Result<(), FileError
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

@@ -92,10 +92,22 @@ mod tests {
         let io = Chain("No such file", None);
         let e = Chain(
             "loading the dataset",
-            Some(Box::new(Chain("/d/manifest.json: No such file", Some(Box::new(io))))),
+            Some(Box::new(Chain(
+                "/d/manifest.json: No such file",
+                Some(Box::new(io)),
+            ))),
         );
-        assert_eq!(error_line(&e), "loading the dataset: /d/manifest.json: No such file");
-        let e = Chain("outer", Some(Box::new(Chain("middle", Some(Box::new(Chain("inner", None)))))));
+        assert_eq!(
+            error_line(&e),
+            "loading the dataset: /d/manifest.json: No such file"
+        );
+        let e = Chain(
+            "outer",
+            Some(Box::new(Chain(
+                "middle",
+                Some(Box::new(Chain("inner", None))),
+            ))),
+        );
         assert_eq!(error_line(&e), "outer: middle: inner");
     }
 }

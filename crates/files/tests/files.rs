@@ -212,6 +212,65 @@ fn undo_removes_only_what_it_created() {
 }
 
 #[test]
+fn prepare_refuses_first_then_creates_folders_it_removes_on_failure() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("in.txt");
+    fs::write(&input, "input").unwrap();
+    // a refused output set creates nothing
+    let clash = Outputs::new()
+        .input(&input)
+        .output(dir.path().join("new/a.txt"))
+        .output(&input);
+    assert!(matches!(
+        clash.prepare(),
+        Err(FileError::OutputIsInput { .. })
+    ));
+    assert!(!dir.path().join("new").exists());
+    // folders are created, and removed with the outputs unless kept
+    let outputs = Outputs::new()
+        .input(&input)
+        .output(dir.path().join("new/deep/a.txt"))
+        .output(dir.path().join("b.txt"));
+    {
+        let _undo = outputs.prepare().unwrap();
+        assert!(dir.path().join("new/deep").is_dir());
+        fs::write(dir.path().join("new/deep/a.txt"), "x").unwrap();
+        fs::write(dir.path().join("b.txt"), "x").unwrap();
+    }
+    assert!(!dir.path().join("new").exists());
+    assert!(!dir.path().join("b.txt").exists());
+    outputs.prepare().unwrap().keep();
+    assert!(dir.path().join("new/deep").is_dir());
+    assert_eq!(fs::read_to_string(&input).unwrap(), "input");
+}
+
+#[test]
+fn an_output_folder_must_be_empty_and_a_folder_undo_removes_its_entries() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run");
+    mfm_files::ensure_empty_dir(&out).unwrap();
+    fs::create_dir(&out).unwrap();
+    mfm_files::ensure_empty_dir(&out).unwrap();
+    fs::write(out.join("user.txt"), "mine").unwrap();
+    let e = mfm_files::ensure_empty_dir(&out).unwrap_err();
+    assert!(matches!(e, FileError::NotEmpty { .. }), "{e}");
+    assert!(e.to_string().contains("is not empty"), "{e}");
+    let fresh = dir.path().join("fresh");
+    {
+        let _undo = Undo::folder(&fresh, &["a", "b"]).unwrap();
+        fs::write(fresh.join("a"), "x").unwrap();
+    }
+    assert!(!fresh.exists());
+    {
+        // the user's own file in an existing folder is never recorded
+        let _undo = Undo::folder(&out, &["user.txt", "new.txt"]).unwrap();
+        fs::write(out.join("new.txt"), "x").unwrap();
+    }
+    assert!(!out.join("new.txt").exists());
+    assert_eq!(fs::read_to_string(out.join("user.txt")).unwrap(), "mine");
+}
+
+#[test]
 fn npy_round_trip_and_precise_errors() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("a.npy");

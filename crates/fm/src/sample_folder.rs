@@ -29,6 +29,31 @@ pub fn run_sample_options(run: &Path) -> SampleOptions {
         .unwrap_or_default()
 }
 
+/// Refuses an output folder that is not a folder, or one with anything in
+/// it unless `replace` (`mfm sample --force`), naming the files a sample
+/// folder holds (`writes`) so the user knows what would be replaced.
+///
+/// # Errors
+/// [`FmError::RunFolder`].
+pub fn check_output_folder(out: &Path, replace: bool, writes: &[&str]) -> Result<()> {
+    if out.exists() && !out.is_dir() {
+        return Err(FmError::RunFolder(format!(
+            "--out {}: exists and is not a folder",
+            out.display()
+        )));
+    }
+    let non_empty = std::fs::read_dir(out).is_ok_and(|mut d| d.next().is_some());
+    if non_empty && !replace {
+        return Err(FmError::RunFolder(format!(
+            "{} exists and is not empty; choose another --out, or add --force to replace what \
+`mfm sample` writes there ({}, sample_NNN.ply; nothing else is touched)",
+            out.display(),
+            writes.join(", ")
+        )));
+    }
+    Ok(())
+}
+
 /// What [`SampleFolder::write`] draws and where.
 #[derive(Clone, Copy, Debug)]
 pub struct SampleFolder<'a> {

@@ -179,6 +179,21 @@ pub struct TrainSummary {
     pub model: Option<PathBuf>,
 }
 
+impl TrainSummary {
+    /// The call on one line: steps, seconds, seconds per step, last loss.
+    pub fn line(&self) -> String {
+        format!(
+            "steps {}..{} in {:.1} s ({:.3} s/step), last loss {}",
+            self.start_step,
+            self.end_step,
+            self.seconds,
+            self.seconds_per_step,
+            self.last_loss
+                .map_or_else(|| "-".to_owned(), |l| format!("{l:.5}"))
+        )
+    }
+}
+
 /// How [`Trainer::resume`] found the run.
 #[derive(Debug)]
 pub struct ResumeInfo {

@@ -112,9 +112,9 @@ pub fn write_operator_folder(
     let comment = format!("written by mfm {}", env!("CARGO_PKG_VERSION"));
     matrix_market::write(&dir.join("L.mtx"), csc(&ops.laplacian), &comment)?;
     matrix_market::write(&dir.join("G.mtx"), csc(&ops.gradient), &comment)?;
-    npy::write(&dir.join("mass.npy"), &ops.mass, &[ops.mass.len() as u64])?;
+    npy::write(dir.join("mass.npy"), &ops.mass, &[ops.mass.len() as u64])?;
     npy::write(
-        &dir.join("face_areas.npy"),
+        dir.join("face_areas.npy"),
         &ops.face_areas,
         &[ops.face_areas.len() as u64],
     )?;
@@ -198,8 +198,8 @@ pub fn write_eigen_folder(
             vectors.push(pairs.vectors[(v, j)]);
         }
     }
-    npy::write(&dir.join(EIGEN_FILES[0]), &pairs.values, &[k as u64])?;
-    npy::write(&dir.join(EIGEN_FILES[1]), &vectors, &[n as u64, k as u64])?;
+    npy::write(dir.join(EIGEN_FILES[0]), &pairs.values, &[k as u64])?;
+    npy::write(dir.join(EIGEN_FILES[1]), &vectors, &[n as u64, k as u64])?;
     let summary = EigenSummary {
         mesh: name.to_owned(),
         vertices: n,
@@ -239,6 +239,7 @@ fn csc(m: &SparseColMat<usize, f64>) -> CscView<'_> {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
     use mfm_geometry::procedural;

@@ -194,6 +194,7 @@ pub fn check_mesh(spec: &str, mesh: &TriMesh) -> Result<Vec<MeshProblem>, MeshSp
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

@@ -560,6 +560,10 @@ pub struct MeshSpectrum {
     pub report: SpectrumReport,
 }
 
+/// The coefficients [`MeshSpectrum::measure`] keeps: `(frequency, c_i of
+/// every sample)`.
+pub type KeptCoefficients = Vec<(usize, Vec<f64>)>;
+
 /// What [`MeshSpectrum::measure`] draws and keeps.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct SpectrumRequest {
@@ -592,7 +596,7 @@ impl MeshSpectrum {
         sampler: &NoiseSampler,
         request: &SpectrumRequest,
         mut progress: impl FnMut(usize),
-    ) -> Result<(Self, Vec<(usize, Vec<f64>)>)> {
+    ) -> Result<(Self, KeptCoefficients)> {
         let v = mesh.num_vertices();
         if request.samples < 2 || request.k == 0 || request.k > v {
             return Err(NoiseError::InvalidParameter {

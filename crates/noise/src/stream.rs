@@ -116,7 +116,7 @@ pub fn write_npy(
     })
 }
 
-/// The JSON [`write_npy_with_summary`] writes beside the samples.
+/// The JSON [`NoiseFiles::write`] writes beside the samples.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct NoiseSummary {
     /// The mesh as the user named it.
@@ -141,34 +141,49 @@ pub struct NoiseSummary {
     pub mean_energy: f64,
 }
 
-/// [`write_npy`], then a [`NoiseSummary`] of the file as pretty JSON at
-/// `json` (the mesh named `mesh` in it), atomically.
-///
-/// # Errors
-/// Those of [`write_npy`]; [`NoiseError::File`] for the summary.
-pub fn write_npy_with_summary(
-    sampler: &NoiseSampler,
-    mesh: &str,
-    path: &Path,
-    json: &Path,
-    samples: usize,
-    channels: usize,
-    seed: u64,
-    progress: impl FnMut(usize),
-) -> Result<(NoiseSummary, WrittenNoise)> {
-    let written = write_npy(sampler, path, samples, channels, seed, progress)?;
-    let summary = NoiseSummary {
-        mesh: mesh.to_owned(),
-        kind: sampler.kind(),
-        samples,
-        vertices: sampler.num_vertices(),
-        channels,
-        seed,
-        gamma: sampler.gamma(),
-        tau: sampler.tau(),
-        layout: "[samples, vertices, channels], row-major f64",
-        mean_energy: written.mean_energy,
-    };
-    mfm_files::write_json(json, &summary)?;
-    Ok((summary, written))
+/// A noise file and its summary: what `mfm noise` writes.
+#[derive(Clone, Copy, Debug)]
+pub struct NoiseFiles<'a> {
+    /// The mesh as the user named it (recorded in the summary).
+    pub mesh: &'a str,
+    /// The `.npy` file of the samples.
+    pub npy: &'a Path,
+    /// The JSON file of the [`NoiseSummary`].
+    pub json: &'a Path,
+    /// Samples `0..samples` of the seed.
+    pub samples: usize,
+    /// Channels per sample.
+    pub channels: usize,
+    /// The seed.
+    pub seed: u64,
+}
+
+impl NoiseFiles<'_> {
+    /// [`write_npy`], then the [`NoiseSummary`] of the file as pretty JSON,
+    /// atomically.
+    ///
+    /// # Errors
+    /// Those of [`write_npy`]; [`NoiseError::File`] for the summary.
+    pub fn write(
+        &self,
+        sampler: &NoiseSampler,
+        progress: impl FnMut(usize),
+    ) -> Result<(NoiseSummary, WrittenNoise)> {
+        let (samples, channels, seed) = (self.samples, self.channels, self.seed);
+        let written = write_npy(sampler, self.npy, samples, channels, seed, progress)?;
+        let summary = NoiseSummary {
+            mesh: self.mesh.to_owned(),
+            kind: sampler.kind(),
+            samples,
+            vertices: sampler.num_vertices(),
+            channels,
+            seed,
+            gamma: sampler.gamma(),
+            tau: sampler.tau(),
+            layout: "[samples, vertices, channels], row-major f64",
+            mean_energy: written.mean_energy,
+        };
+        mfm_files::write_json(self.json, &summary)?;
+        Ok((summary, written))
+    }
 }

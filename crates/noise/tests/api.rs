@@ -352,6 +352,82 @@ fn the_long_form_fills_in_defaults_and_validates() {
 }
 
 #[test]
+fn kind_names_parse_as_the_short_form_writes_them() {
+    for name in KindName::ALL {
+        assert_eq!(name.as_str().parse::<KindName>().unwrap(), name);
+        let kind = NoiseKind::from_parts(name, None, None, None).unwrap();
+        assert_eq!(kind.kind_name(), name);
+    }
+    let e = "Matern".parse::<KindName>().unwrap_err();
+    assert!(e.to_string().contains("matern-normalized"), "{e}");
+}
+
+#[test]
+fn the_summary_beside_a_noise_file_describes_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = common::blob(2);
+    let sampler = NoiseSampler::new(&mesh, NoiseKind::Matern { tau: 10.0 }).unwrap();
+    let (npy, json) = (dir.path().join("n.npy"), dir.path().join("n.json"));
+    let mut seen = Vec::new();
+    let files = mfm_noise::stream::NoiseFiles {
+        mesh: "blob",
+        npy: &npy,
+        json: &json,
+        samples: 3,
+        channels: 2,
+        seed: 9,
+    };
+    let (summary, written) = files.write(&sampler, |done| seen.push(done)).unwrap();
+    assert_eq!(seen, vec![3]);
+    let a = mfm_files::npy::read::<f64>(&npy).unwrap();
+    assert_eq!(a.shape, vec![3, mesh.num_vertices(), 2]);
+    let batch = sampler.sample_range(0, 3, 2, 9).unwrap();
+    assert_eq!(a.values, batch.data());
+    let stored: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(stored["mesh"], "blob");
+    assert_eq!(stored["samples"], 3);
+    assert_eq!(stored["tau"], 10.0);
+    assert_eq!(stored["mean_energy"], summary.mean_energy);
+    assert_eq!(written.first_signal, batch.signal(0, 0));
+}
+
+#[test]
+fn a_measured_spectrum_keeps_the_asked_coefficients_and_compares_meshes() {
+    let (coarse, fine) = (common::blob(2), common::blob(3));
+    let request = spectrum::SpectrumRequest {
+        samples: 64,
+        k: 12,
+        seed: 3,
+        keep: vec![2, 40, 5],
+    };
+    let mut measured = Vec::new();
+    for (name, mesh) in [("coarse", &coarse), ("fine", &fine)] {
+        let sampler = NoiseSampler::new(mesh, NoiseKind::Matern { tau: 10.0 }).unwrap();
+        let mut last = 0;
+        let (m, kept) =
+            spectrum::MeshSpectrum::measure(name, mesh, &sampler, &request, |d| last = d).unwrap();
+        assert_eq!(last, 64);
+        // 40 is not below k: left out; the others in the order asked
+        assert_eq!(
+            kept.iter().map(|(i, c)| (*i, c.len())).collect::<Vec<_>>(),
+            vec![(2, 64), (5, 64)]
+        );
+        assert_eq!(m.report.variance.len(), 12);
+        measured.push(m);
+    }
+    let file = spectrum::SpectrumFile::new(NoiseKind::Matern { tau: 10.0 }, 64, 12, 3, measured);
+    assert_eq!(file.comparisons.len(), 1);
+    let too_many = spectrum::SpectrumRequest {
+        k: coarse.num_vertices() + 1,
+        ..request
+    };
+    let sampler = NoiseSampler::new(&coarse, NoiseKind::White).unwrap();
+    let e = spectrum::MeshSpectrum::measure("c", &coarse, &sampler, &too_many, |_| {}).unwrap_err();
+    assert!(matches!(e, NoiseError::InvalidParameter { .. }), "{e}");
+}
+
+#[test]
 fn tau_below_the_zero_tau_regularization_is_refused_by_name() {
     let mesh = mfm_geometry::procedural::icosphere(2);
     let ops = Operators::new(&mesh).unwrap();

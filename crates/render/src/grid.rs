@@ -354,24 +354,6 @@ pub fn render_grid(
     Ok(img)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn text_is_shrunk_then_cut_to_fit() {
-        assert_eq!(fit_text("abcd", 3, 100), (3, "abcd".to_string()));
-        assert_eq!(fit_text("abcd", 3, 64), (2, "abcd".to_string()));
-        assert_eq!(fit_text("abcdefgh", 2, 40), (1, "abc..".to_string()));
-        assert_eq!(
-            fit_text("ab\nabcdefgh", 1, 40),
-            (1, "ab\nabc..".to_string())
-        );
-        assert_eq!(fit_text("abc", 1, 8), (1, ".".to_string()));
-        assert_eq!(fit_text("abc", 1, 0), (1, String::new()));
-    }
-}
-
 /// Renders `panels` in a grid of `columns` under `title`, with one colour
 /// bar per panel on the colour scale `range`, and writes it as a PNG
 /// ([`crate::save_png`]): the one picture the mfm commands draw of a set of
@@ -394,4 +376,22 @@ pub fn save_grid(
     opts.panel.colorbar = true;
     let img = render_grid(panels, columns, &opts)?;
     crate::save_png(&img, path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn text_is_shrunk_then_cut_to_fit() {
+        assert_eq!(fit_text("abcd", 3, 100), (3, "abcd".to_string()));
+        assert_eq!(fit_text("abcd", 3, 64), (2, "abcd".to_string()));
+        assert_eq!(fit_text("abcdefgh", 2, 40), (1, "abc..".to_string()));
+        assert_eq!(
+            fit_text("ab\nabcdefgh", 1, 40),
+            (1, "ab\nabc..".to_string())
+        );
+        assert_eq!(fit_text("abc", 1, 8), (1, ".".to_string()));
+        assert_eq!(fit_text("abc", 1, 0), (1, String::new()));
+    }
 }
