@@ -128,8 +128,12 @@ pub fn sample(a: &SampleArgs) -> Result<()> {
         seed: a.seed,
         ply: a.ply,
     };
-    let seconds = write_sample_folder(&sampler, &mesh, &folder)
-        .with_context(|| format!("sampling the model in {}", a.run.display()))?;
+    let seconds = write_sample_folder(&sampler, &mesh, &folder).with_context(|| {
+        format!(
+            "sampling the model in {}; nothing was written",
+            a.run.display()
+        )
+    })?;
     println!(
         "wrote {} ({} targets over {} vertices in {seconds:.1} s, {:.2} s each)",
         a.out.display(),

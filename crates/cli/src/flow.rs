@@ -2,7 +2,6 @@
 //! with the `network` feature).
 
 use crate::mesh::{load_mesh_checked, mesh_path};
-use crate::output::ensure_empty;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use mfm_fm::checkpoint::CONFIG_FILE;
@@ -188,7 +187,6 @@ pub fn train(a: TrainArgs) -> Result<()> {
             noise: a.noise,
             device: a.device,
         };
-        ensure_empty(&a.out)?;
         let run = RunFolder::start(&a.out, overrides.apply(config)?)?;
         let [n, v, c] = run.dataset_shape;
         println!(
@@ -266,9 +264,12 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         ply: a.ply,
         progress: true,
     };
-    let t = folder
-        .write(&sampler, &mesh, &opts)
-        .with_context(|| format!("sampling the model in {}", a.run.display()))?;
+    let t = folder.write(&sampler, &mesh, &opts).with_context(|| {
+        format!(
+            "sampling the model in {}; nothing was written",
+            a.run.display()
+        )
+    })?;
     println!(
         "{} samples on {} vertices in {:.2} s ({:.1} ms per sample, {} {:?} steps) -> {}",
         t.samples,

@@ -119,9 +119,9 @@ impl RunFolder {
     /// it; [`dataset_dir`]'s; the dataset's and [`Trainer::new`]'s errors
     /// (nothing is left behind).
     pub fn start(out: &Path, config: RunConfig) -> Result<Self> {
+        mfm_files::ensure_empty_dir(out)?;
         let dataset = dataset_dir(None, &config)?;
         let (data, dataset_shape) = open(&dataset)?;
-        mfm_files::ensure_empty_dir(out)?;
         let undo = mfm_files::Undo::folder(out, &[CONFIG_FILE, FLOW_FILE, LOG_FILE])?;
         let mesh = data.mesh().clone();
         let trainer = Trainer::new(out, config, &mesh, data)?;
