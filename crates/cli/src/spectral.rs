@@ -281,22 +281,13 @@ impl SpectrumArgs {
             })
             .with_context(|| format!("{spec}: spectrum"))?;
             bar.finish_and_clear();
-            let r = &m.report;
-            println!(
-                "{spec}: {v} vertices, {} samples, {} frequencies; largest |Var/theory - 1| = {:.3}; \
-max |corr| = {:.3} (sampling level {:.3}); mean f^T M f = {:.4e}",
-                args.samples,
-                args.k,
-                r.max_relative_error.unwrap_or(f64::NAN),
-                r.independence.max_abs_correlation,
-                r.independence.reference,
-                r.mean_energy
-            );
+            println!("{}", m.summary());
             for (slot, i) in histograms.iter_mut().zip(&args.coefficients) {
                 if let Some((_, c)) = kept.iter().find(|(j, _)| j == i) {
                     slot.push((spec.clone(), c.clone()));
                 }
             }
+            let r = &m.report;
             series.push(VarianceSeries::new(
                 spec.clone(),
                 &r.eigenvalues,
@@ -306,11 +297,8 @@ max |corr| = {:.3} (sampling level {:.3}); mean f^T M f = {:.4e}",
             meshes.push(m);
         }
         let file = SpectrumFile::new(kind, args.samples, args.k, args.seed, meshes);
-        for (m, c) in file.meshes.iter().skip(1).zip(&file.comparisons) {
-            println!(
-                "{} vs {}: max W2 = {:.3e}, max |std ratio - 1| = {:.3}",
-                m.mesh, file.meshes[0].mesh, c.max_w2, c.max_relative_std_difference
-            );
+        for line in file.comparison_lines() {
+            println!("{line}");
         }
         mfm_files::write_json(&args.out, &file)?;
         println!("wrote {}", args.out.display());

@@ -91,6 +91,18 @@ pub struct Summary {
     pub total: usize,
 }
 
+/// A preset's configuration with its parameter count, as `mfm net summary
+/// --json` prints it.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct PresetReport<'a> {
+    /// The configuration.
+    pub config: &'a PoissonNetConfig,
+    /// Its number of parameters.
+    pub parameters: usize,
+    /// The preset's name.
+    pub preset: &'a str,
+}
+
 impl std::fmt::Display for Summary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         let w = self

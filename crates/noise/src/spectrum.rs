@@ -641,7 +641,45 @@ impl MeshSpectrum {
     }
 }
 
+impl MeshSpectrum {
+    /// The spectrum on one line: sizes, the largest relative variance
+    /// error, the largest correlation against its sampling level, the
+    /// mean energy (what `mfm spectrum` prints per mesh).
+    pub fn summary(&self) -> String {
+        let r = &self.report;
+        format!(
+            "{}: {} vertices, {} samples, {} frequencies; largest |Var/theory - 1| = {:.3}; \
+max |corr| = {:.3} (sampling level {:.3}); mean f^T M f = {:.4e}",
+            self.mesh,
+            self.vertices,
+            r.num_signals,
+            r.eigenvalues.len(),
+            r.max_relative_error.unwrap_or(f64::NAN),
+            r.independence.max_abs_correlation,
+            r.independence.reference,
+            r.mean_energy
+        )
+    }
+}
+
 impl SpectrumFile {
+    /// One line per later mesh against the first: the largest `W2` and
+    /// relative standard-deviation difference over the frequencies.
+    pub fn comparison_lines(&self) -> Vec<String> {
+        let first = self.meshes.first().map_or("", |m| m.mesh.as_str());
+        self.meshes
+            .iter()
+            .skip(1)
+            .zip(&self.comparisons)
+            .map(|(m, c)| {
+                format!(
+                    "{} vs {first}: max W2 = {:.3e}, max |std ratio - 1| = {:.3}",
+                    m.mesh, c.max_w2, c.max_relative_std_difference
+                )
+            })
+            .collect()
+    }
+
     /// The report of `meshes` (the first is the reference), with each later
     /// mesh [`compare`]d with the first.
     pub fn new(
