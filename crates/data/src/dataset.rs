@@ -181,7 +181,7 @@ impl Dataset {
     ///
     /// # Errors
     /// [`DataError::SizeMismatch`] if the signals are not on the mesh;
-    /// [`DataError::Io`] if `dir` is a non-empty folder (or not a folder), or a
+    /// [`DataError::Files`] (`Io`) if `dir` is a non-empty folder (or not a folder), or a
     /// file cannot be written; [`DataError::WriteMesh`].
     pub fn write(
         dir: impl AsRef<Path>,
@@ -272,7 +272,7 @@ impl Dataset {
     /// and the `.npy` header; not the signals.
     ///
     /// # Errors
-    /// [`DataError::Io`] for a missing or unreadable file, [`DataError::Format`]
+    /// [`DataError::Files`] (`Io`) for a missing or unreadable file, [`DataError::Files`] (`Format`)
     /// (naming the file) for a malformed manifest, an unsupported format
     /// version, a wrong dtype, order or shape, sizes that disagree between the
     /// files, or a truncated array; [`DataError::ReadMesh`] for a bad mesh.
@@ -367,7 +367,7 @@ impl Dataset {
     /// dataset (`None` for another generator).
     ///
     /// # Errors
-    /// [`DataError::Format`] naming the manifest when they do not parse.
+    /// [`DataError::Files`] (`Format`) naming the manifest when they do not parse.
     pub fn generator_params<T: serde::de::DeserializeOwned>(
         &self,
         generator: &str,

@@ -140,7 +140,7 @@ impl DeformManifest {
     /// generator made it).
     ///
     /// # Errors
-    /// [`DataError::Format`] naming the manifest when `generator_params` do
+    /// [`DataError::Files`] (`Format`) naming the manifest when `generator_params` do
     /// not parse.
     pub fn of(dataset: &Dataset) -> Result<Option<Self>> {
         dataset.generator_params(GENERATOR)

@@ -126,7 +126,7 @@ pub struct Evaluation {
 ///
 /// # Errors
 /// [`DataError::SizeMismatch`] when the samples' vertices or channels are
-/// not the reference's; [`DataError::Format`] for unreadable generator
+/// not the reference's; [`DataError::Files`] (`Format`) for unreadable generator
 /// parameters; the metrics', fits' and projection's errors.
 pub fn evaluate(reference: &Dataset, generated: &InMemorySignals) -> Result<Evaluation> {
     for (what, found, expected) in [
@@ -272,7 +272,7 @@ impl EvalFiles<'_> {
     /// writes the report and pictures; nothing is left behind on failure.
     ///
     /// # Errors
-    /// [`DataError::Format`] for non-finite samples, [`DataError::SizeMismatch`]
+    /// [`DataError::Files`] (`Format`) for non-finite samples, [`DataError::SizeMismatch`]
     /// for samples not on the reference's mesh, and those of the readers,
     /// [`evaluate`] and the writers.
     pub fn run(&self) -> Result<Evaluation> {

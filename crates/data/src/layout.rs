@@ -299,23 +299,20 @@ fn fill(
 /// Writes a deformation space as pretty JSON ([`SPACE`]), atomically.
 ///
 /// # Errors
-/// [`DataError::Io`] naming the file.
+/// [`DataError::Files`] (`Io`) naming the file.
 pub fn write_space(path: &Path, space: &DeformSpace) -> Result<()> {
     write_pretty(path, space)
 }
 
 /// Pretty JSON at `path`, atomically, with this crate's errors.
 fn write_pretty(path: &Path, value: &impl serde::Serialize) -> Result<()> {
-    mfm_files::write_json(path, value).map_err(|e| match e {
-        mfm_files::FileError::Io { source, .. } => DataError::io(path, source),
-        other => DataError::format(path, other.to_string()),
-    })
+    Ok(mfm_files::write_json(path, value)?)
 }
 
 /// Reads a deformation space ([`SPACE`] of a deformation experiment).
 ///
 /// # Errors
-/// [`DataError::Io`] if it cannot be read, [`DataError::Format`] if it is
+/// [`DataError::Files`] (`Io`) if it cannot be read, [`DataError::Files`] (`Format`) if it is
 /// not a deformation space.
 pub fn read_space(path: &Path) -> Result<DeformSpace> {
     let text = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;
@@ -451,7 +448,7 @@ impl PairsExperiment<'_> {
 /// Reads the pair space of a pairs experiment ([`PAIR_SPACE`]).
 ///
 /// # Errors
-/// [`DataError::Io`] if it cannot be read, [`DataError::Format`] if it is
+/// [`DataError::Files`] (`Io`) if it cannot be read, [`DataError::Files`] (`Format`) if it is
 /// not a pair space.
 pub fn read_pair_space(path: &Path) -> Result<PairSpace> {
     let text = std::fs::read_to_string(path).map_err(|e| DataError::io(path, e))?;

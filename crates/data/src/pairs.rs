@@ -93,7 +93,7 @@ impl PairsManifest {
     /// generator made it).
     ///
     /// # Errors
-    /// [`DataError::Format`] naming the manifest when `generator_params` do
+    /// [`DataError::Files`] (`Format`) naming the manifest when `generator_params` do
     /// not parse.
     pub fn of(dataset: &Dataset) -> Result<Option<Self>> {
         dataset.generator_params(GENERATOR)
@@ -212,7 +212,7 @@ impl PairSpace {
 /// Reads a pairs dataset's [`PARAMS_FILE`].
 ///
 /// # Errors
-/// [`DataError::Io`] / [`DataError::Format`] naming the file.
+/// [`DataError::Files`] (`Io`) / [`DataError::Files`] (`Format`) naming the file.
 pub fn read_params(dataset: &Dataset) -> Result<PairParams> {
     let path = dataset.dir().join(PARAMS_FILE);
     let text = std::fs::read_to_string(&path).map_err(|e| DataError::io(&path, e))?;

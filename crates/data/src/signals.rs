@@ -122,7 +122,7 @@ impl InMemorySignals {
     /// `f32` or `f64` (narrowed to `f32`), such as `mfm sample` writes.
     ///
     /// # Errors
-    /// The reader's [`DataError::Files`]; [`DataError::Format`] for any
+    /// The reader's [`DataError::Files`]; [`DataError::Files`] (`Format`) for any
     /// other rank.
     pub fn read_npy(path: &std::path::Path) -> Result<Self> {
         let a = mfm_files::npy::read::<f32>(path)?;

@@ -9,6 +9,7 @@ use mfm_data::dataset::{Dataset, MANIFEST_FILE, MESH_FILE, Manifest, SIGNALS_FIL
 use mfm_data::experiment::{GmmMeshes, HalfDensity, split_x};
 use mfm_data::gmm::{GENERATOR_NAME, GmmConfig, GmmDistance, GmmGenerator, generate};
 use mfm_data::{DataError, InMemorySignals, SignalSource};
+use mfm_files::FileError;
 use mfm_geometry::geodesic::HeatGeodesics;
 use mfm_geometry::operators::lumped_mass;
 use mfm_geometry::{TriMesh, procedural};
@@ -48,7 +49,7 @@ fn write_npy(path: &Path, dtype: &str, shape: &[u64], values: usize) {
 
 fn format_error(err: DataError) -> (std::path::PathBuf, String) {
     match err {
-        DataError::Format { path, message } => (path, message),
+        DataError::Files(FileError::Format { path, message }) => (path, message),
         other => panic!("expected a format error, got {other:?}"),
     }
 }
@@ -110,7 +111,7 @@ fn dataset_refuses_to_overwrite_unless_asked() {
     let err =
         Dataset::write(&dir, &mesh, &b, Manifest::new("b", serde_json::Value::Null)).unwrap_err();
     assert!(
-        matches!(&err, DataError::Io { path, .. } if path == &dir),
+        matches!(&err, DataError::Files(FileError::Io { path, .. }) if path == &dir),
         "{err}"
     );
     // untouched
@@ -268,10 +269,12 @@ fn wrong_shape_dtype_and_manifest_are_named() {
 
     // missing files name themselves
     std::fs::remove_file(&manifest).unwrap();
-    assert!(matches!(Dataset::open(&dir), Err(DataError::Io { path, .. }) if path == manifest));
+    assert!(
+        matches!(Dataset::open(&dir), Err(DataError::Files(FileError::Io { path, .. })) if path == manifest)
+    );
     assert!(matches!(
         Dataset::open(tmp.path().join("nope")),
-        Err(DataError::Io { .. })
+        Err(DataError::Files(FileError::Io { .. }))
     ));
 }
 

@@ -149,7 +149,7 @@ impl Adam {
     /// Restores moments written by [`Adam::save`] and the step count.
     ///
     /// # Errors
-    /// [`FmError::Format`] naming the file when a moment is missing or has
+    /// [`FmError::Files`] (`Format`) naming the file when a moment is missing or has
     /// another shape; libtorch read errors.
     pub fn load(&mut self, path: &Path, steps: u64) -> Result<()> {
         let file: BTreeMap<String, Tensor> = Tensor::read_safetensors(path)?.into_iter().collect();

@@ -136,7 +136,7 @@ impl FlowSpec {
     /// Reads a `flow.json`.
     ///
     /// # Errors
-    /// [`FmError::Io`] / [`FmError::Format`] naming the file; a spec whose
+    /// [`FmError::Files`] (`Io`) / [`FmError::Files`] (`Format`) naming the file; a spec whose
     /// offset length differs from its channel count is a format error.
     pub fn read(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
@@ -184,7 +184,7 @@ impl FlowSpec {
     /// Writes the spec as JSON, atomically.
     ///
     /// # Errors
-    /// [`FmError::Io`] naming the file.
+    /// [`FmError::Files`] (`Io`) naming the file.
     pub fn write(&self, path: impl AsRef<Path>) -> Result<()> {
         let path = path.as_ref();
         let json = serde_json::to_string_pretty(self)
@@ -254,19 +254,16 @@ pub struct CheckpointInfo {
 /// file in the same folder, synced, renamed over `path`; removed on failure.
 ///
 /// # Errors
-/// [`FmError::Io`] naming the file (also for a folder, device or FIFO at
+/// [`FmError::Files`] (`Io`) naming the file (also for a folder, device or FIFO at
 /// `path`, which is never replaced).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    mfm_files::write_atomic(path, |w| w.write_all(bytes)).map_err(|e| match e {
-        mfm_files::FileError::Io { path, source } => FmError::io(path, source),
-        other => FmError::io(path, std::io::Error::other(other.to_string())),
-    })
+    Ok(mfm_files::write_atomic(path, |w| w.write_all(bytes))?)
 }
 
 /// Size and CRC-32 of a file.
 ///
 /// # Errors
-/// [`FmError::Io`] naming the file.
+/// [`FmError::Files`] (`Io`) naming the file.
 pub fn file_record(path: &Path) -> Result<FileRecord> {
     let bytes = std::fs::read(path).map_err(|e| FmError::io(path, e))?;
     let mut h = crc32fast::Hasher::new();
@@ -288,7 +285,7 @@ pub fn checkpoint_dir(run_dir: &Path, step: u64) -> PathBuf {
 /// step; temporary folders are skipped. No folder: an empty list.
 ///
 /// # Errors
-/// [`FmError::Io`] if the folder cannot be listed.
+/// [`FmError::Files`] (`Io`) if the folder cannot be listed.
 pub fn list_checkpoints(run_dir: &Path) -> Result<Vec<CheckpointInfo>> {
     let root = run_dir.join(CHECKPOINTS_DIR);
     let entries = match std::fs::read_dir(&root) {
@@ -321,7 +318,7 @@ pub fn list_checkpoints(run_dir: &Path) -> Result<Vec<CheckpointInfo>> {
 /// Removes temporary folders left in `checkpoints/` by interrupted writes.
 ///
 /// # Errors
-/// [`FmError::Io`] naming the folder that could not be removed.
+/// [`FmError::Files`] (`Io`) naming the folder that could not be removed.
 pub fn remove_stale_temporaries(run_dir: &Path) -> Result<()> {
     let root = run_dir.join(CHECKPOINTS_DIR);
     let Ok(entries) = std::fs::read_dir(&root) else {
@@ -346,7 +343,7 @@ pub fn remove_stale_temporaries(run_dir: &Path) -> Result<()> {
 /// Cost: one read of every file of the checkpoint.
 ///
 /// # Errors
-/// [`FmError::Io`] for a missing or unreadable file, [`FmError::Format`]
+/// [`FmError::Files`] (`Io`) for a missing or unreadable file, [`FmError::Files`] (`Format`)
 /// naming the file that is truncated, corrupted, or unparsable.
 pub fn verify_checkpoint(dir: &Path) -> Result<CheckpointState> {
     verify_checkpoint_listing(
@@ -436,7 +433,7 @@ pub struct FinalModelRecord {
 /// Records the checksums of the final model in `run_dir` ([`FINAL_RECORD_FILE`]).
 ///
 /// # Errors
-/// [`FmError::Io`] naming the file.
+/// [`FmError::Files`] (`Io`) naming the file.
 pub fn write_final_record(run_dir: &Path) -> Result<()> {
     let mut files = BTreeMap::new();
     for name in [WEIGHTS_FILE, NET_CONFIG_FILE] {
@@ -452,7 +449,7 @@ pub fn write_final_record(run_dir: &Path) -> Result<()> {
 /// a run written before the record existed (no such file) passes.
 ///
 /// # Errors
-/// [`FmError::Format`] naming the file that is truncated or corrupted, or an
+/// [`FmError::Files`] (`Format`) naming the file that is truncated or corrupted, or an
 /// unreadable record.
 pub fn verify_final_model(run_dir: &Path) -> Result<()> {
     let path = run_dir.join(FINAL_RECORD_FILE);
@@ -477,7 +474,7 @@ pub fn verify_final_model(run_dir: &Path) -> Result<()> {
 /// same step). Returns the final folder.
 ///
 /// # Errors
-/// Those of `fill`; [`FmError::Io`] naming the file or folder.
+/// Those of `fill`; [`FmError::Files`] (`Io`) naming the file or folder.
 pub fn write_checkpoint(
     run_dir: &Path,
     mut state: CheckpointState,
@@ -536,7 +533,7 @@ pub fn write_checkpoint(
 /// folders.
 ///
 /// # Errors
-/// [`FmError::Io`] naming the folder that could not be removed.
+/// [`FmError::Files`] (`Io`) naming the folder that could not be removed.
 pub fn prune_checkpoints(run_dir: &Path, keep: usize) -> Result<Vec<PathBuf>> {
     let all = list_checkpoints(run_dir)?;
     let n = all.len().saturating_sub(keep.max(1));
@@ -560,7 +557,7 @@ pub type NewestValid = (
 /// ones that did not, each with its error (newest first).
 ///
 /// # Errors
-/// [`FmError::Io`] if the checkpoint folder cannot be listed.
+/// [`FmError::Files`] (`Io`) if the checkpoint folder cannot be listed.
 pub fn newest_valid_checkpoint(run_dir: &Path) -> Result<NewestValid> {
     newest_valid_with(run_dir, verify_checkpoint)
 }

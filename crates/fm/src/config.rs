@@ -888,7 +888,7 @@ impl RunConfig {
     /// Parses TOML text; `origin` names the text in errors (a file name).
     ///
     /// # Errors
-    /// [`FmError::Format`] with the parser's message (line, column, and the
+    /// [`FmError::Files`] (`Format`) with the parser's message (line, column, and the
     /// unknown or ill-typed field), or [`FmError::Config`] from
     /// [`RunConfig::validate`] prefixed with `origin`.
     pub fn from_toml_str(text: &str, origin: impl AsRef<Path>) -> Result<Self> {
@@ -905,7 +905,7 @@ impl RunConfig {
     /// Reads a TOML file.
     ///
     /// # Errors
-    /// [`FmError::Io`] if it cannot be read; otherwise as
+    /// [`FmError::Files`] (`Io`) if it cannot be read; otherwise as
     /// [`RunConfig::from_toml_str`], naming the file.
     pub fn from_toml_file(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
@@ -928,7 +928,7 @@ impl RunConfig {
     /// temporary file in the same folder, then a rename).
     ///
     /// # Errors
-    /// [`FmError::Io`] naming the file.
+    /// [`FmError::Files`] (`Io`) naming the file.
     pub fn write_toml_file(&self, path: impl AsRef<Path>) -> Result<()> {
         crate::checkpoint::write_atomic(path.as_ref(), self.to_toml_string()?.as_bytes())
     }

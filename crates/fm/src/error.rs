@@ -10,23 +10,6 @@ use std::path::PathBuf;
 /// files is at fault.
 #[derive(Debug, thiserror::Error)]
 pub enum FmError {
-    /// A file or folder could not be read or written.
-    #[error("{}: {source}", path.display())]
-    Io {
-        /// The file or folder.
-        path: PathBuf,
-        /// The underlying error.
-        source: std::io::Error,
-    },
-    /// A file exists but its contents are not what they should be
-    /// (truncated, corrupted, wrong shape, wrong version).
-    #[error("{}: {message}", path.display())]
-    Format {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong with it.
-        message: String,
-    },
     /// Two sizes that must agree do not.
     #[error("size mismatch: {what} has {found}, expected {expected}")]
     SizeMismatch {
@@ -84,26 +67,26 @@ pub enum FmError {
     /// A dataset, signal or metric error ([`mfm_data`]).
     #[error(transparent)]
     Data(#[from] mfm_data::DataError),
-    /// An output file could not be written ([`mfm_files`]).
+    /// A file could not be read or written, or its contents are not what
+    /// they should be (truncated, corrupted, wrong shape, wrong version),
+    /// naming the file ([`mfm_files::FileError`]: the one I/O and format
+    /// error of every mfm crate).
     #[error(transparent)]
     Files(#[from] mfm_files::FileError),
 }
 
 impl FmError {
-    /// An [`FmError::Io`] for `path`.
+    /// An operating-system error on `path`: [`FmError::Files`] holding
+    /// [`mfm_files::FileError::Io`], the one I/O error of every mfm crate.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Self::Io {
-            path: path.into(),
-            source,
-        }
+        Self::Files(mfm_files::FileError::io(path, source))
     }
 
-    /// An [`FmError::Format`] for `path`.
+    /// A file whose contents are not what they should be (truncated,
+    /// corrupted, wrong shape, wrong version): [`FmError::Files`] holding
+    /// [`mfm_files::FileError::Format`].
     pub fn format(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
-        Self::Format {
-            path: path.into(),
-            message: message.into(),
-        }
+        Self::Files(mfm_files::FileError::format(path, message))
     }
 }
 

@@ -38,7 +38,7 @@ impl Overrides {
     /// absolute (so that a later resume works from any folder).
     ///
     /// # Errors
-    /// [`FmError::Io`] when the dataset path cannot be made absolute.
+    /// [`FmError::Files`] (`Io`) when the dataset path cannot be made absolute.
     pub fn apply(&self, mut config: RunConfig) -> Result<RunConfig> {
         if let Some(d) = &self.dataset {
             config.dataset.path = Some(d.clone());

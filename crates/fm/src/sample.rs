@@ -294,7 +294,7 @@ impl Sampler {
     /// available.
     ///
     /// # Errors
-    /// [`FmError::Format`] / [`FmError::Io`] naming the file at fault, or
+    /// [`FmError::Files`] (`Format`) / [`FmError::Files`] (`Io`) naming the file at fault, or
     /// [`FmError::Config`] when the folder has neither a final model nor a
     /// checkpoint.
     pub fn load(run_dir: impl AsRef<Path>, device: Option<Device>) -> Result<Self> {

@@ -312,7 +312,10 @@ fn damaged_checkpoints_are_named_and_skipped() {
     std::fs::write(&weights10, &intact[..intact.len() / 2]).unwrap();
     let err = checkpoint::verify_checkpoint(&c10).unwrap_err();
     let msg = err.to_string();
-    assert!(matches!(err, FmError::Format { .. }), "{msg}");
+    assert!(
+        matches!(err, FmError::Files(mfm_files::FileError::Format { .. })),
+        "{msg}"
+    );
     assert!(
         msg.contains(&weights10.display().to_string()) && msg.contains("bytes"),
         "{msg}"
