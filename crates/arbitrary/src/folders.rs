@@ -234,16 +234,14 @@ pub fn write_sample_folder(
     f: &SampleFolder<'_>,
 ) -> Result<f64> {
     let (n, out) = (f.count, f.out);
-    let mut guard = mfm_files::Outputs::new();
-    for file in [ARBITRARY_SPEC, WEIGHTS_FILE, PREDICTOR_WEIGHTS] {
-        guard = guard.input(f.run.join(file));
-    }
-    if let Some(s) = f.source_file {
-        guard = guard.input(s);
-    }
     let mut outputs: Vec<PathBuf> = SAMPLE_FILES.iter().map(|s| out.join(s)).collect();
     outputs.extend((0..f.ply.min(n)).map(|i| out.join(sample_ply_name(i))));
-    let undo = outputs.iter().fold(guard, |g, o| g.output(o)).prepare()?;
+    let run_files = [ARBITRARY_SPEC, WEIGHTS_FILE, PREDICTOR_WEIGHTS];
+    let undo = mfm_files::Outputs::new()
+        .inputs(run_files.map(|file| f.run.join(file)))
+        .inputs(f.source_file)
+        .outputs(&outputs)
+        .prepare()?;
     let t0 = std::time::Instant::now();
     let shapes = sampler.sample(source, 0, n, f.seed)?;
     let seconds = t0.elapsed().as_secs_f64();
@@ -336,8 +334,10 @@ pub fn evaluate_experiment(
     }
     let mut outputs = vec![f.out.join("report.json")];
     outputs.extend(sets.iter().map(|s| f.out.join(format!("{s}.png"))));
-    let guard = mfm_files::Outputs::new().input(f.run).input(f.experiment);
-    let undo = outputs.iter().fold(guard, |g, o| g.output(o)).prepare()?;
+    let undo = mfm_files::Outputs::new()
+        .inputs([f.run, f.experiment])
+        .outputs(&outputs)
+        .prepare()?;
     let mut reports = Vec::new();
     for (set, png) in sets.iter().zip(&outputs[1..]) {
         let dir = f.experiment.join(set);

@@ -10,9 +10,6 @@ pub use mfm_files::ensure_empty_dir as ensure_empty;
 /// twice or are not regular files, creates the outputs' folders, and
 /// returns the [`mfm_files::Undo`] of what the command creates.
 pub fn prepare_outputs(inputs: &[Option<&Path>], outputs: &[PathBuf]) -> Result<mfm_files::Undo> {
-    let guard = inputs
-        .iter()
-        .flatten()
-        .fold(mfm_files::Outputs::new(), |g, i| g.input(i));
-    Ok(outputs.iter().fold(guard, |g, o| g.output(o)).prepare()?)
+    let guard = mfm_files::Outputs::new().inputs(inputs.iter().flatten());
+    Ok(guard.outputs(outputs).prepare()?)
 }

@@ -384,19 +384,17 @@ impl PlausibilityFiles<'_> {
 /// The output guard of an evaluation: the JSON, the picture and the two
 /// pictures beside it.
 fn guard(inputs: &[&Path], json: Option<&Path>, png: Option<&Path>) -> Result<mfm_files::Undo> {
-    let mut outputs = mfm_files::Outputs::new();
-    for i in inputs {
-        outputs = outputs.input(i);
-    }
-    for o in json.into_iter() {
-        outputs = outputs.output(o);
-    }
-    if let Some(png) = png {
-        outputs = outputs
-            .output(png)
-            .output(pictures::sibling_png(png, "samples"))
-            .output(pictures::sibling_png(png, "difference"));
-    }
+    let pictures = png.into_iter().flat_map(|png| {
+        [
+            png.to_path_buf(),
+            pictures::sibling_png(png, "samples"),
+            pictures::sibling_png(png, "difference"),
+        ]
+    });
+    let outputs = mfm_files::Outputs::new()
+        .inputs(inputs)
+        .outputs(json)
+        .outputs(pictures);
     Ok(outputs.prepare()?)
 }
 

@@ -55,6 +55,17 @@ impl Outputs {
         self
     }
 
+    /// Adds every path of `paths` as an input ([`Outputs::input`]); an
+    /// `Option` adds nothing when it is `None`.
+    pub fn inputs<P: AsRef<Path>>(self, paths: impl IntoIterator<Item = P>) -> Self {
+        paths.into_iter().fold(self, Self::input)
+    }
+
+    /// Adds every path of `paths` as an output ([`Outputs::output`]).
+    pub fn outputs<P: AsRef<Path>>(self, paths: impl IntoIterator<Item = P>) -> Self {
+        paths.into_iter().fold(self, Self::output)
+    }
+
     /// Checks every rule; the first broken one is the error.
     ///
     /// # Errors

@@ -241,6 +241,20 @@ fn prepare_refuses_first_then_creates_folders_it_removes_on_failure() {
     assert!(!dir.path().join("b.txt").exists());
     outputs.prepare().unwrap().keep();
     assert!(dir.path().join("new/deep").is_dir());
+    // the iterator forms: None adds no input, a clash among them is found
+    let none: Option<&Path> = None;
+    let many = Outputs::new()
+        .inputs(none)
+        .inputs([&input])
+        .outputs([dir.path().join("c.txt"), input.clone()]);
+    assert!(matches!(many.check(), Err(FileError::OutputIsInput { .. })));
+    assert!(
+        Outputs::new()
+            .inputs(none)
+            .outputs([&input])
+            .check()
+            .is_ok()
+    );
     assert_eq!(fs::read_to_string(&input).unwrap(), "input");
 }
 

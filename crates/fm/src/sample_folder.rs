@@ -100,20 +100,18 @@ impl SampleFolder<'_> {
         }
         let (v, c) = (mesh.num_vertices(), sampler.flow().channels);
         let outputs = self.outputs();
-        let mut guard = mfm_files::Outputs::new();
-        for f in [
+        let run_files = [
             CONFIG_FILE,
             FLOW_FILE,
             WEIGHTS_FILE,
             NET_CONFIG_FILE,
             CHECKPOINTS_DIR,
-        ] {
-            guard = guard.input(self.run.join(f));
-        }
-        if let Some(m) = self.mesh_file {
-            guard = guard.input(m);
-        }
-        let undo = outputs.iter().fold(guard, |g, o| g.output(o)).prepare()?;
+        ];
+        let undo = mfm_files::Outputs::new()
+            .inputs(run_files.map(|f| self.run.join(f)))
+            .inputs(self.mesh_file)
+            .outputs(&outputs)
+            .prepare()?;
         let shape = [n as u64, v as u64, c as u64];
         mfm_files::space::ensure_space(&outputs[0], mfm_files::npy::file_bytes(&shape, 4))?;
         self.remove_stale_plys(&outputs)?;

@@ -218,14 +218,10 @@ eigenvalues ascending; eigenvectors are the columns of the [V, k] array, phi^T M
 
 /// The guard of a folder of `files` written from the mesh `name`.
 fn guard(name: &str, dir: &Path, files: &[&str]) -> Result<mfm_files::Undo, FileError> {
-    let mut outputs = Outputs::new();
-    if let Some(input) = crate::spec::spec_path(name) {
-        outputs = outputs.input(input);
-    }
-    for f in files {
-        outputs = outputs.output(dir.join(f));
-    }
-    outputs.prepare()
+    Outputs::new()
+        .inputs(crate::spec::spec_path(name))
+        .outputs(files.iter().map(|f| dir.join(f)))
+        .prepare()
 }
 
 fn csc(m: &SparseColMat<usize, f64>) -> CscView<'_> {
