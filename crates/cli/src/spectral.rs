@@ -6,6 +6,7 @@ use crate::output::prepare_outputs;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
+use mfm_geometry::operators::Operators;
 use mfm_noise::spectrum::{MeshSpectrum, SpectrumFile, SpectrumRequest};
 use mfm_noise::stream;
 use mfm_noise::{KindName, NoiseError, NoiseKind, NoiseSampler};
@@ -273,10 +274,13 @@ impl SpectrumArgs {
             if args.k > v {
                 bail!("{spec}: --k {} exceeds the vertex count {v}", args.k);
             }
-            let sampler = NoiseSampler::new(&mesh, kind)
-                .with_context(|| format!("{spec}: cannot set up {} noise", kind))?;
+            // one assembly of the operators, for the sampler and the eigenpairs
+            let setup = || format!("{spec}: cannot set up {kind} noise");
+            let ops = Operators::new(&mesh).with_context(setup)?;
+            let sampler = NoiseSampler::from_operators(&ops.laplacian, &ops.mass, kind)
+                .with_context(setup)?;
             let bar = progress(args.samples as u64, spec);
-            let (m, kept) = MeshSpectrum::measure(spec, &mesh, &sampler, &request, |done| {
+            let (m, kept) = MeshSpectrum::measure(spec, &ops, &sampler, &request, |done| {
                 bar.set_position(done as u64)
             })
             .with_context(|| format!("{spec}: spectrum"))?;

@@ -578,9 +578,10 @@ pub struct SpectrumRequest {
 }
 
 impl MeshSpectrum {
-    /// Streams one channel of samples of `sampler` (set up on `mesh`,
-    /// named `name`) through a [`SpectralAnalyzer`] on the `k` lowest
-    /// eigenpairs of `mesh` ([`eigenpairs`]) and reports against the
+    /// Streams one channel of samples of `sampler` (built from `ops`, the
+    /// operators of the mesh named `name`, e.g. with
+    /// [`NoiseSampler::from_operators`]) through a [`SpectralAnalyzer`] on
+    /// the `k` lowest eigenpairs ([`eigenpairs`]) and reports against the
     /// kind's [`Theory`]. Returns the spectrum and the coefficients of the
     /// `keep` frequencies below `k` (in the order given, others left out);
     /// `progress(done)` is called after each chunk.
@@ -589,15 +590,15 @@ impl MeshSpectrum {
     ///
     /// # Errors
     /// [`NoiseError::InvalidParameter`] for fewer than 2 samples or `k`
-    /// outside `1..=V`; operator, eigensolver and sampler errors.
+    /// outside `1..=V`; eigensolver and sampler errors.
     pub fn measure(
         name: &str,
-        mesh: &mfm_geometry::TriMesh,
+        ops: &mfm_geometry::operators::Operators,
         sampler: &NoiseSampler,
         request: &SpectrumRequest,
         mut progress: impl FnMut(usize),
     ) -> Result<(Self, KeptCoefficients)> {
-        let v = mesh.num_vertices();
+        let v = ops.mass.len();
         if request.samples < 2 || request.k == 0 || request.k > v {
             return Err(NoiseError::InvalidParameter {
                 name: "samples, k",
@@ -608,7 +609,6 @@ impl MeshSpectrum {
                 ),
             });
         }
-        let ops = mfm_geometry::operators::Operators::new(mesh)?;
         let pairs = eigenpairs(&ops.laplacian, &ops.mass, request.k)?;
         let theory = sampler.theory(&pairs)?;
         let mut analyzer = SpectralAnalyzer::new(&pairs, &ops.mass)?.keep(&request.keep);

@@ -403,10 +403,12 @@ fn a_measured_spectrum_keeps_the_asked_coefficients_and_compares_meshes() {
     };
     let mut measured = Vec::new();
     for (name, mesh) in [("coarse", &coarse), ("fine", &fine)] {
-        let sampler = NoiseSampler::new(mesh, NoiseKind::Matern { tau: 10.0 }).unwrap();
+        let ops = Operators::new(mesh).unwrap();
+        let kind = NoiseKind::Matern { tau: 10.0 };
+        let sampler = NoiseSampler::from_operators(&ops.laplacian, &ops.mass, kind).unwrap();
         let mut last = 0;
         let (m, kept) =
-            spectrum::MeshSpectrum::measure(name, mesh, &sampler, &request, |d| last = d).unwrap();
+            spectrum::MeshSpectrum::measure(name, &ops, &sampler, &request, |d| last = d).unwrap();
         assert_eq!(last, 64);
         // 40 is not below k: left out; the others in the order asked
         assert_eq!(
@@ -422,8 +424,10 @@ fn a_measured_spectrum_keeps_the_asked_coefficients_and_compares_meshes() {
         k: coarse.num_vertices() + 1,
         ..request
     };
-    let sampler = NoiseSampler::new(&coarse, NoiseKind::White).unwrap();
-    let e = spectrum::MeshSpectrum::measure("c", &coarse, &sampler, &too_many, |_| {}).unwrap_err();
+    let ops = Operators::new(&coarse).unwrap();
+    let sampler =
+        NoiseSampler::from_operators(&ops.laplacian, &ops.mass, NoiseKind::White).unwrap();
+    let e = spectrum::MeshSpectrum::measure("c", &ops, &sampler, &too_many, |_| {}).unwrap_err();
     assert!(matches!(e, NoiseError::InvalidParameter { .. }), "{e}");
 }
 
