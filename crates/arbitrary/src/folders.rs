@@ -12,6 +12,7 @@ use std::sync::atomic::AtomicBool;
 use mfm_data::layout::{HOLDOUT, REFERENCE};
 use mfm_data::pictures::SHOWN;
 use mfm_fm::checkpoint::WEIGHTS_FILE;
+use mfm_fm::run_folder::keep_if_progress;
 use mfm_fm::sample::sample_ply_name;
 use mfm_fm::{FmError, Result};
 use mfm_geometry::TriMesh;
@@ -66,12 +67,12 @@ enum Plan {
 }
 
 /// A training run in its folder, ready to [`TrainingRun::train`].
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct TrainingRun {
     out: PathBuf,
     plan: Plan,
-    /// `Some(created)` for a fresh run: whether the folder was created.
-    fresh: Option<bool>,
+    /// For a fresh run, the folder taken ([`mfm_files::Undo::empty_folder`]).
+    fresh: Option<mfm_files::Undo>,
 }
 
 fn stored<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
@@ -111,7 +112,7 @@ impl TrainingRun {
                 fresh: None,
             });
         };
-        mfm_files::ensure_empty_dir(out)?;
+        let undo = mfm_files::Undo::empty_folder(out)?;
         let dataset = absolute(&f.dataset)?;
         let plan = match kind {
             RunKind::Predictor => {
@@ -136,7 +137,7 @@ impl TrainingRun {
         Ok(Self {
             out: out.to_path_buf(),
             plan,
-            fresh: Some(!out.exists()),
+            fresh: Some(undo),
         })
     }
 
@@ -155,40 +156,21 @@ impl TrainingRun {
     }
 
     /// Trains until the total or `stop`. A fresh run that fails before its
-    /// first checkpoint removes what it wrote (the folder, if it made it).
+    /// first checkpoint removes what it wrote, and the folder if it made it
+    /// ([`mfm_fm::run_folder::keep_if_progress`]).
     ///
     /// # Errors
     /// The training's ([`predictor::train`], [`flow::train`]).
-    pub fn train(&self, stop: &AtomicBool, progress: bool) -> Result<TrainReport> {
+    pub fn train(mut self, stop: &AtomicBool, progress: bool) -> Result<TrainReport> {
         let out = &self.out;
         let result = match &self.plan {
             Plan::Predictor(c, dataset) => predictor::train(out, dataset, c, stop, progress),
             Plan::Flow(c, dataset, p) => flow::train(out, dataset, p, c, stop, progress),
         };
-        let has_checkpoint = mfm_fm::checkpoint::list_checkpoints(out).is_ok_and(|c| !c.is_empty());
-        match self.fresh {
-            Some(created) if result.is_err() && !has_checkpoint => remove_run(out, created),
-            _ => {}
+        if let Some(undo) = self.fresh.take() {
+            keep_if_progress(undo, out, result.is_ok());
         }
         result
-    }
-}
-
-/// Removes a failed fresh run: the folder if it was created, else (it
-/// was empty before) everything in it. Best effort: the training's error
-/// is the one reported.
-fn remove_run(out: &Path, created: bool) {
-    if created {
-        let _ = std::fs::remove_dir_all(out);
-        return;
-    }
-    for e in std::fs::read_dir(out).into_iter().flatten().flatten() {
-        let p = e.path();
-        let _ = if p.is_dir() {
-            std::fs::remove_dir_all(&p)
-        } else {
-            std::fs::remove_file(&p)
-        };
     }
 }
 

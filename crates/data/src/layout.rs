@@ -98,9 +98,6 @@ pub struct GmmExperiment<'a> {
 }
 
 impl GmmExperiment<'_> {
-    /// What [`Self::write`] creates in its folder.
-    pub const ENTRIES: [&'static str; 4] = [TRAIN, REFERENCE, TEST_MESH, PREVIEW];
-
     /// Generates and writes the experiment into `out` (missing or empty),
     /// with [`PREVIEW`] of the first training signals; returns the training
     /// set. On failure, what it created is removed.
@@ -116,7 +113,6 @@ impl GmmExperiment<'_> {
     pub fn write(&self, out: &Path, options: &GenerateOptions) -> Result<Dataset> {
         fill(
             out,
-            &Self::ENTRIES,
             || self.write_sets(out, options),
             |train, path| {
                 pictures::signals(
@@ -197,18 +193,6 @@ pub struct DeformExperiment<'a> {
 }
 
 impl DeformExperiment<'_> {
-    /// What [`Self::write`] creates in its folder.
-    pub const ENTRIES: [&'static str; 8] = [
-        TRAIN,
-        REFERENCE,
-        HOLDOUT,
-        DEFORM_MESHES[0],
-        DEFORM_MESHES[1],
-        DEFORM_MESHES[2],
-        SPACE,
-        PREVIEW,
-    ];
-
     /// Writes the meshes, the space, the datasets and [`PREVIEW`] (the rest
     /// shape and the first training shapes) into `out` (missing or empty);
     /// returns the training set. On failure, what it created is removed.
@@ -221,7 +205,6 @@ impl DeformExperiment<'_> {
     pub fn write(&self, out: &Path) -> Result<Dataset> {
         fill(
             out,
-            &Self::ENTRIES,
             || self.write_sets(out),
             |train, path| pictures::deform_preview(&self.meshes.coarse, train, path),
         )
@@ -280,16 +263,15 @@ impl DeformExperiment<'_> {
 }
 
 /// Fills the experiment folder `out` (missing or empty) with `sets`, then
-/// draws `preview` of the training set to [`PREVIEW`]; on any failure the
-/// `entries` it created, and the folder if it created it, are removed.
+/// draws `preview` of the training set to [`PREVIEW`]; on any failure all
+/// it wrote, and the folder if it created it, is removed
+/// ([`mfm_files::Undo::empty_folder`]).
 fn fill(
     out: &Path,
-    entries: &[&str],
     sets: impl FnOnce() -> Result<Dataset>,
     preview: impl FnOnce(&InMemorySignals, &Path) -> Result<()>,
 ) -> Result<Dataset> {
-    mfm_files::ensure_empty_dir(out)?;
-    let undo = mfm_files::Undo::folder(out, entries)?;
+    let undo = mfm_files::Undo::empty_folder(out)?;
     let train = sets()?;
     preview(&train.load_all()?, &out.join(PREVIEW))?;
     undo.keep();
@@ -355,18 +337,6 @@ pub struct PairsExperiment<'a> {
 }
 
 impl PairsExperiment<'_> {
-    /// What [`Self::write`] creates in its folder.
-    pub const ENTRIES: [&'static str; 8] = [
-        TRAIN,
-        REFERENCE,
-        HOLDOUT,
-        DEFORM_MESHES[0],
-        DEFORM_MESHES[1],
-        DEFORM_MESHES[2],
-        PAIR_SPACE,
-        PREVIEW,
-    ];
-
     /// Writes the meshes, the space, the datasets and [`PREVIEW`] (the poses
     /// of the first two shapes) into `out` (missing or empty); returns the
     /// training set. On failure, what it created is removed.
@@ -380,7 +350,6 @@ impl PairsExperiment<'_> {
     pub fn write(&self, out: &Path) -> Result<Dataset> {
         fill(
             out,
-            &Self::ENTRIES,
             || self.write_sets(out),
             |train, path| {
                 pictures::pairs_preview(

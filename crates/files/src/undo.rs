@@ -25,6 +25,8 @@ use std::path::{Path, PathBuf};
 #[must_use = "dropping an Undo removes what it recorded; call keep() on success"]
 pub struct Undo {
     created: Vec<PathBuf>,
+    /// A folder that was missing or empty when taken: all in it is ours.
+    owned: Option<PathBuf>,
     kept: bool,
 }
 
@@ -65,17 +67,18 @@ impl Undo {
         }
     }
 
-    /// Creates the folder `dir` (see [`Undo::create_dir_all`]) and records
-    /// the `entries` a command writes into it.
+    /// Takes the folder `dir` for a command to fill: it must be missing or
+    /// empty ([`crate::ensure_empty_dir`]); it is created, and unless
+    /// [`Undo::keep`] is called everything in it is removed again, whatever
+    /// the command wrote there, and the folder too if it was created here.
     ///
     /// # Errors
-    /// [`FileError::Io`] naming the folder.
-    pub fn folder(dir: &Path, entries: &[&str]) -> Result<Self, FileError> {
+    /// [`FileError::NotEmpty`]; [`FileError::Io`] naming the folder.
+    pub fn empty_folder(dir: &Path) -> Result<Self, FileError> {
+        crate::guard::ensure_empty_dir(dir)?;
         let mut undo = Self::new();
         undo.create_dir_all(dir)?;
-        for e in entries {
-            undo.file(dir.join(e));
-        }
+        undo.owned = Some(dir.to_path_buf());
         Ok(undo)
     }
 
@@ -89,6 +92,14 @@ impl Drop for Undo {
     fn drop(&mut self) {
         if self.kept {
             return;
+        }
+        let owned = self.owned.as_deref().and_then(|d| fs::read_dir(d).ok());
+        for e in owned.into_iter().flatten().flatten() {
+            let p = e.path();
+            let _ = match e.file_type() {
+                Ok(t) if t.is_dir() => fs::remove_dir_all(&p),
+                _ => fs::remove_file(&p),
+            };
         }
         for p in self.created.iter().rev() {
             match fs::symlink_metadata(p) {

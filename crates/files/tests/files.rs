@@ -259,7 +259,7 @@ fn prepare_refuses_first_then_creates_folders_it_removes_on_failure() {
 }
 
 #[test]
-fn an_output_folder_must_be_empty_and_a_folder_undo_removes_its_entries() {
+fn an_output_folder_must_be_empty_and_a_taken_folder_is_emptied_on_failure() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("run");
     mfm_files::ensure_empty_dir(&out).unwrap();
@@ -269,18 +269,32 @@ fn an_output_folder_must_be_empty_and_a_folder_undo_removes_its_entries() {
     let e = mfm_files::ensure_empty_dir(&out).unwrap_err();
     assert!(matches!(e, FileError::NotEmpty { .. }), "{e}");
     assert!(e.to_string().contains("is not empty"), "{e}");
-    let fresh = dir.path().join("fresh");
+    // a taken folder must be empty; it is created, and all written in it
+    // is removed unless kept, named in advance or not
+    assert!(matches!(
+        Undo::empty_folder(&out),
+        Err(FileError::NotEmpty { .. })
+    ));
+    let fresh = dir.path().join("fresh/run");
     {
-        let _undo = Undo::folder(&fresh, &["a", "b"]).unwrap();
-        fs::write(fresh.join("a"), "x").unwrap();
+        let _undo = Undo::empty_folder(&fresh).unwrap();
+        fs::create_dir(fresh.join("checkpoints")).unwrap();
+        fs::write(fresh.join("checkpoints/a"), "x").unwrap();
+        fs::write(fresh.join("b"), "x").unwrap();
     }
-    assert!(!fresh.exists());
+    assert!(!dir.path().join("fresh").exists());
+    let empty = dir.path().join("empty");
+    fs::create_dir(&empty).unwrap();
     {
-        // the user's own file in an existing folder is never recorded
-        let _undo = Undo::folder(&out, &["user.txt", "new.txt"]).unwrap();
-        fs::write(out.join("new.txt"), "x").unwrap();
+        let _undo = Undo::empty_folder(&empty).unwrap();
+        fs::write(empty.join("new.txt"), "x").unwrap();
     }
-    assert!(!out.join("new.txt").exists());
+    assert!(empty.is_dir(), "a folder that existed stays");
+    assert_eq!(fs::read_dir(&empty).unwrap().count(), 0);
+    let undo = Undo::empty_folder(&empty).unwrap();
+    fs::write(empty.join("kept.txt"), "x").unwrap();
+    undo.keep();
+    assert!(empty.join("kept.txt").is_file());
     assert_eq!(fs::read_to_string(out.join("user.txt")).unwrap(), "mine");
 }
 

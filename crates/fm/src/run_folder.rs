@@ -13,7 +13,7 @@ use std::sync::atomic::AtomicBool;
 use mfm_data::dataset::Dataset;
 use mfm_noise::NoiseKind;
 
-use crate::checkpoint::{self, CONFIG_FILE, FLOW_FILE, LOG_FILE};
+use crate::checkpoint::{self, CONFIG_FILE};
 use crate::config::{DeviceChoice, RunConfig, locate_dataset};
 use crate::error::{FmError, Result};
 use crate::train::{TrainSummary, Trainer};
@@ -119,10 +119,9 @@ impl RunFolder {
     /// it; [`dataset_dir`]'s; the dataset's and [`Trainer::new`]'s errors
     /// (nothing is left behind).
     pub fn start(out: &Path, config: RunConfig) -> Result<Self> {
-        mfm_files::ensure_empty_dir(out)?;
+        let undo = mfm_files::Undo::empty_folder(out)?;
         let dataset = dataset_dir(None, &config)?;
         let (data, dataset_shape) = open(&dataset)?;
-        let undo = mfm_files::Undo::folder(out, &[CONFIG_FILE, FLOW_FILE, LOG_FILE])?;
         let mesh = data.mesh().clone();
         let trainer = Trainer::new(out, config, &mesh, data)?;
         Ok(Self {
@@ -188,13 +187,20 @@ impl RunFolder {
     /// The trainer's.
     pub fn train(mut self, stop: &AtomicBool, progress: bool) -> Result<TrainSummary> {
         let result = self.trainer.run(stop, progress);
-        let keep = result.is_ok()
-            || checkpoint::list_checkpoints(self.trainer.run_dir()).is_ok_and(|c| !c.is_empty());
-        if let Some(undo) = self.fresh.take()
-            && keep
-        {
-            undo.keep();
+        if let Some(undo) = self.fresh.take() {
+            keep_if_progress(undo, self.trainer.run_dir(), result.is_ok());
         }
         result
+    }
+}
+
+/// Settles the [`mfm_files::Undo`] of a fresh run's folder once training
+/// ended: kept when training `succeeded` or the run holds a checkpoint (the
+/// user's progress, to resume from); otherwise dropped, which removes the
+/// run. Every kind of run (this crate's and the arbitrary-source model's)
+/// follows this rule.
+pub fn keep_if_progress(fresh: mfm_files::Undo, run_dir: &Path, succeeded: bool) {
+    if succeeded || checkpoint::list_checkpoints(run_dir).is_ok_and(|c| !c.is_empty()) {
+        fresh.keep();
     }
 }
