@@ -9,7 +9,7 @@
 //! seed, then samples on the non-uniform mesh are compared to the reference
 //! set: the bump-fit quality (residual of a fit by the generator's own
 //! family, peak, bumps above half height, the fraction within twice the
-//! data's residual, diversity; `mfm_data::quality`), GMM test error, MMD, COV,
+//! data's residual, diversity; `mfm_eval::quality`), GMM test error, MMD, COV,
 //! 1-NNA. Drives the release `mfm` binary (the
 //! xtask itself does not link libtorch). Writes `table.md`, `table.csv`,
 //! `table.json`, and per kind the run folder, the samples and

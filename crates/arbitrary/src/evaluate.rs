@@ -33,11 +33,11 @@ use std::time::Instant;
 
 use mfm_data::dataset::Dataset;
 use mfm_data::eigenbasis::{Eigenbasis, relative_errors};
-use mfm_data::metrics::{MassWeighted, coverage, mmd};
 use mfm_data::pairs::{self, PairsManifest};
-use mfm_data::quality::{ParamSpread, Quartiles};
 use mfm_data::{InMemorySignals, SignalSource};
 use mfm_deform::{Arap, DeformParams, project};
+use mfm_eval::metrics::{MassWeighted, coverage, mmd};
+use mfm_eval::quality::{ParamSpread, Quartiles};
 use mfm_geometry::TriMesh;
 use serde::{Deserialize, Serialize};
 

@@ -1,11 +1,11 @@
 //! `mfm eval`: distribution metrics, sample-quality fits and pictures of
 //! generated samples against a reference dataset or a deformation space
-//! ([`mfm_data::evaluation`]).
+//! ([`mfm_eval::evaluation`]).
 
 use crate::mesh::{load_mesh_checked, mesh_path};
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use mfm_data::evaluation::{EvalFiles, PlausibilityFiles};
+use mfm_eval::evaluation::{EvalFiles, PlausibilityFiles};
 use std::path::PathBuf;
 
 /// Arguments of `mfm eval`.

@@ -1,6 +1,5 @@
-//! Deformation datasets and their plausibility metric (DESIGN.md sections
-//! 7-8; the paper's reposing and elastic-deformation experiments at CPU
-//! scale).
+//! Deformation datasets (DESIGN.md sections 7-8; the paper's reposing and
+//! elastic-deformation experiments at CPU scale).
 //!
 //! The paper's deformation data (SMPL poses, IPC simulations) is not
 //! available here, so shapes come from a *known* parametric space instead:
@@ -19,27 +18,23 @@
 //! one [`mfm_deform::HandleSet`] selects corresponding regions on all of them
 //! and the same parameters give the same pose at every resolution.
 //!
-//! Plausibility ([`plausibility`]): each generated shape is projected onto
-//! the space (handle transforms fitted by Kabsch, then the ARAP solve, see
-//! [`mfm_deform::project`]) and the mass-weighted mean squared distance to
-//! the projection is reported: our stand-in for the paper's SMPL-regression
-//! MSE (0 for a shape the space can produce).
+//! How plausible generated shapes are (their distance to the space) is
+//! measured by `mfm_eval::plausibility`.
 
 use std::ops::Range;
 use std::path::Path;
 
 use indicatif::{ProgressBar, ProgressStyle};
-use mfm_deform::{Arap, DeformParams, DeformSpace, HandleSet, normalize_rest, project};
+use mfm_deform::{DeformParams, DeformSpace, HandleSet, normalize_rest};
 use mfm_geometry::TriMesh;
 use mfm_geometry::frame::CanonicalFrame;
 use mfm_processing::decimate::decimate;
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::dataset::{Dataset, Manifest};
 use crate::error::{DataError, Result};
 use crate::experiment::{GmmMeshes, HalfDensity};
-use crate::signals::{InMemorySignals, SignalSource};
+use crate::signals::InMemorySignals;
 
 /// The generator name recorded in the manifest of a deformation dataset.
 pub const GENERATOR: &str = "deform";
@@ -237,80 +232,6 @@ pub fn space_for(
     space.max_shift = max_shift;
     space.validate()?;
     Ok(space)
-}
-
-/// Projection errors of a set of shapes; see [`plausibility`].
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Plausibility {
-    /// Mass-weighted mean squared distance of each shape to its projection
-    /// onto the deformation space (squared units of the normalized mesh,
-    /// whose bounding-box diagonal is 1).
-    pub mse: Vec<f64>,
-    /// Mean of `mse`.
-    pub mean: f64,
-    /// Median of `mse`.
-    pub median: f64,
-    /// The projections of the first `keep` shapes (see [`plausibility`]).
-    #[serde(skip)]
-    pub projections: Vec<Vec<[f64; 3]>>,
-    /// The fitted parameters of every shape's projection, in order (their
-    /// spread: [`crate::quality::ParamSpread`]).
-    #[serde(skip)]
-    pub params: Vec<DeformParams>,
-}
-
-/// Projects every signal of `shapes` (3 channels: positions on `mesh`) onto
-/// `space` and reports the projection errors, keeping the projected
-/// positions of the first `keep` shapes (for pictures). `mesh` may be any
-/// triangulation of the surface the space was made for (the handles select
-/// its regions by position).
-///
-/// Cost: one ARAP factorization of `mesh`, then per shape one Kabsch fit per
-/// handle and one ARAP solve (parallel over shapes).
-///
-/// # Errors
-/// [`DataError::SizeMismatch`] when the shapes are not 3-channel signals on
-/// `mesh`; [`DataError::Deform`] (a handle region is empty on `mesh`, the ARAP
-/// solve failed).
-pub fn plausibility(
-    space: &DeformSpace,
-    mesh: &TriMesh,
-    shapes: &InMemorySignals,
-    keep: usize,
-) -> Result<Plausibility> {
-    if shapes.channels() != 3 || shapes.num_vertices() != mesh.num_vertices() {
-        return Err(DataError::SizeMismatch {
-            what: "shapes for the plausibility metric (vertices x channels)".into(),
-            expected: mesh.num_vertices() * 3,
-            found: shapes.num_vertices() * shapes.channels(),
-        });
-    }
-    let arap = Arap::new(mesh, &space.handles)?;
-    let results = (0..shapes.len())
-        .into_par_iter()
-        .map(|i| {
-            let p = project(&arap, space, &shapes.positions(i))?;
-            Ok((p.mse, (i < keep).then_some(p.positions), p.params))
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let mut mse = Vec::with_capacity(results.len());
-    let mut kept = Vec::with_capacity(results.len());
-    let mut params = Vec::with_capacity(results.len());
-    for (m, k, p) in results {
-        mse.push(m);
-        kept.push(k);
-        params.push(p);
-    }
-    let projections = kept.into_iter().flatten().collect();
-    let mean = mse.iter().sum::<f64>() / mse.len().max(1) as f64;
-    let median = crate::quality::Quartiles::of(&mse).median;
-    Ok(Plausibility {
-        mse,
-        mean,
-        median,
-        projections,
-        params,
-    })
 }
 
 /// A damaged source mesh for the robustness table (the paper's holes,

@@ -593,13 +593,11 @@ fn coarsened_half_keeps_the_surface_close() {
     );
 }
 
-/// The experiment layout written by `GmmExperiment`, evaluated by
-/// `evaluation::evaluate`: the reference set against itself is perfect,
-/// flat samples are not, and the report's JSON keeps its field names and
-/// reads back.
+/// The experiment layout written by `GmmExperiment`: the train set is
+/// returned, the reference set is held out (its own seed, on the test mesh)
+/// and the test mesh itself is not written.
 #[test]
-fn gmm_experiment_layout_and_evaluation() {
-    use mfm_data::evaluation::{self, EvalReport};
+fn gmm_experiment_layout() {
     use mfm_data::gmm::GenerateOptions;
     use mfm_data::layout::{self, GmmExperiment};
     let meshes = GmmMeshes::from_base(procedural::icosphere(2), HalfDensity::default()).unwrap();
@@ -625,40 +623,4 @@ fn gmm_experiment_layout_and_evaluation() {
     assert_eq!(reference.manifest().seed, Some(layout::held_out_seed(3)));
     assert_eq!(reference.num_vertices(), meshes.test.num_vertices());
     assert!(!dir.path().join(layout::TEST_MESH).exists());
-
-    let itself = reference.load_all().unwrap();
-    let e = evaluation::evaluate(&reference, &itself).unwrap();
-    assert_eq!(e.report.metrics.mmd, 0.0);
-    assert_eq!(e.report.metrics.num_generated, 12);
-    let q = e
-        .report
-        .quality
-        .as_ref()
-        .expect("a GMM set gets the bump fit");
-    assert!(q.generated.residual.median < 0.05, "{}", q.summary());
-    assert!(e.report.shapes.is_none() && e.projections.is_none());
-    let flat = InMemorySignals::new(
-        vec![0.0; 12 * itself.num_vertices()],
-        12,
-        itself.num_vertices(),
-        1,
-    )
-    .unwrap();
-    let f = evaluation::evaluate(&reference, &flat).unwrap();
-    assert!(f.report.metrics.mmd > 0.0);
-    assert!(f.report.quality.as_ref().unwrap().generated.residual.median > 0.5);
-    // the metrics' fields sit at the top level, as `mfm eval --out` wrote them
-    let json = serde_json::to_value(&f.report).unwrap();
-    for key in ["mmd", "cov", "one_nna", "test_error", "quality"] {
-        assert!(json.get(key).is_some(), "{key} in {json}");
-    }
-    assert!(json.get("projection_mse").is_none());
-    let back: EvalReport = serde_json::from_value(json).unwrap();
-    assert_eq!(back, f.report);
-    // samples on another mesh are refused by size
-    let wrong = InMemorySignals::new(vec![0.0; 4], 1, 4, 1).unwrap();
-    assert!(matches!(
-        evaluation::evaluate(&reference, &wrong),
-        Err(DataError::SizeMismatch { .. })
-    ));
 }

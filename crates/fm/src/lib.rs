@@ -2,9 +2,10 @@
 //!
 //! Flow matching on triangle meshes (DESIGN.md sections 6-8): training a
 //! PoissonNet along the rectified-flow path from Matérn noise, ODE sampling
-//! on any triangulation, run configurations and checkpoints. The datasets,
-//! generators, metrics and quality measures live in the libtorch-free
-//! [`mfm_data`] crate and are re-exported here under their old paths; the
+//! on any triangulation, run configurations and checkpoints. The datasets
+//! and generators live in the libtorch-free [`mfm_data`] crate and are
+//! re-exported here under their old paths (the metrics and quality
+//! measures are the `mfm-eval` crate); the
 //! arbitrary-source model, built on this crate's context, Adam, seeding
 //! and checkpoint format, is the `mfm-arbitrary` crate.
 
@@ -21,6 +22,6 @@ pub mod train;
 
 pub use error::{FmError, Result};
 pub use mfm_data::{
-    DataError, InMemorySignals, SignalSource, dataset, deformations, experiment, gmm, metrics,
-    pictures, quality, signals,
+    DataError, InMemorySignals, SignalSource, dataset, deformations, experiment, gmm, pictures,
+    signals,
 };

@@ -18,14 +18,15 @@ use mfm_deform::DeformSpace;
 use mfm_geometry::TriMesh;
 use mfm_geometry::operators::Operators;
 
-use crate::dataset::Dataset;
-use crate::deformations::{self, DeformManifest, Plausibility};
-use crate::error::{DataError, Result};
-use crate::gmm::{self, GmmConfig, GmmGenerator};
+use mfm_data::dataset::Dataset;
+use mfm_data::deformations::DeformManifest;
+use mfm_data::gmm::{self, GmmConfig, GmmGenerator};
+use mfm_data::{DataError, InMemorySignals, Result, SignalSource};
+
 use crate::metrics::Metrics;
 use crate::pictures;
+use crate::plausibility::{self, Plausibility};
 use crate::quality::{GmmQualityReport, ParamSpread, Quartiles};
-use crate::signals::{InMemorySignals, SignalSource};
 use std::path::Path;
 
 /// Generated shapes whose projections [`evaluate`] keeps for pictures.
@@ -168,8 +169,8 @@ pub fn evaluate(reference: &Dataset, generated: &InMemorySignals) -> Result<Eval
     };
     let (shapes, projections) = match &deform {
         Some(d) => {
-            let p = deformations::plausibility(&d.space, &mesh, generated, PROJECTIONS_KEPT)?;
-            let r = deformations::plausibility(&d.space, &mesh, &reference, 0)?;
+            let p = plausibility::plausibility(&d.space, &mesh, generated, PROJECTIONS_KEPT)?;
+            let r = plausibility::plausibility(&d.space, &mesh, &reference, 0)?;
             let (g, rs) = (ParamSpread::of(&p.params), ParamSpread::of(&r.params));
             let report = ShapeReport {
                 projection_mse: p.mean,
@@ -238,7 +239,7 @@ pub fn plausibility_only(
             found: shapes.num_vertices(),
         });
     }
-    let p = deformations::plausibility(space, mesh, shapes, PROJECTIONS_KEPT)?;
+    let p = plausibility::plausibility(space, mesh, shapes, PROJECTIONS_KEPT)?;
     let report = PlausibilityReport {
         projection_mse: p.mean,
         projection_mse_median: p.median,
@@ -368,7 +369,7 @@ impl PlausibilityFiles<'_> {
                 ),
             ));
         }
-        let space = crate::layout::read_space(self.space)?;
+        let space = mfm_data::layout::read_space(self.space)?;
         let (report, p) = plausibility_only(&space, self.mesh, &generated)?;
         if let Some(json) = self.json {
             mfm_files::write_json(json, &report)?;

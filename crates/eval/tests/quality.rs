@@ -3,8 +3,8 @@
 #![allow(clippy::unwrap_used)]
 
 use mfm_data::gmm::{GmmConfig, GmmGenerator};
-use mfm_data::quality::{GmmQualityReport, Quartiles, diversity, fit_bumps};
 use mfm_data::{InMemorySignals, SignalSource};
+use mfm_eval::quality::{GmmQualityReport, Quartiles, diversity, fit_bumps};
 use mfm_geometry::operators::lumped_mass;
 use mfm_geometry::{TriMesh, procedural};
 use mfm_noise::{NoiseKind, NoiseSampler};

@@ -2,10 +2,10 @@
 
 #![allow(clippy::unwrap_used)]
 
-use mfm_data::metrics::{
+use mfm_data::{DataError, InMemorySignals};
+use mfm_eval::metrics::{
     MassWeighted, Metrics, coverage, evaluate, mass_weighted_distance, mmd, one_nna,
 };
-use mfm_data::{DataError, InMemorySignals};
 use proptest::prelude::*;
 
 fn set(rows: &[&[f32]], vertices: usize, channels: usize) -> InMemorySignals {

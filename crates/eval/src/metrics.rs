@@ -37,7 +37,7 @@
 //!
 //! # Example
 //! ```
-//! use mfm_data::metrics::{evaluate, mass_weighted_distance};
+//! use mfm_eval::metrics::{evaluate, mass_weighted_distance};
 //! use mfm_data::InMemorySignals;
 //! let mass = [1.0, 1.0, 2.0];
 //! // one channel, 3 vertices: d = sqrt((1*1 + 0 + 2*0) / 4) = 0.5
@@ -50,8 +50,7 @@
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{DataError, Result};
-use crate::signals::{InMemorySignals, SignalSource};
+use mfm_data::{DataError, InMemorySignals, Result, SignalSource};
 
 /// All metrics of one evaluation (see the [module docs](self) for the
 /// definitions).

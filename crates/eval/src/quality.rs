@@ -22,7 +22,7 @@
 //!   variety, 0 for a set of copies.
 //! - **Deformations** ([`ParamSpread`]): the spread of the handle parameters
 //!   of the projections onto the deformation space
-//!   ([`crate::deformations::plausibility`]); a model that collapses onto
+//!   ([`crate::plausibility`]); a model that collapses onto
 //!   the rest pose has none.
 //!
 //! Aggregates are [`Quartiles`] (the distribution of the per-sample numbers)
@@ -35,10 +35,10 @@ use mfm_geometry::TriMesh;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use crate::error::{DataError, Result};
-use crate::gmm::GmmGenerator;
+use mfm_data::gmm::GmmGenerator;
+use mfm_data::{DataError, InMemorySignals, Result, SignalSource};
+
 use crate::metrics::MassWeighted;
-use crate::signals::{InMemorySignals, SignalSource};
 
 /// Candidate centres tried per round of [`fit_bumps`].
 pub const CANDIDATES: usize = 16;
