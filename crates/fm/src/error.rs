@@ -75,6 +75,15 @@ pub enum FmError {
     Files(#[from] mfm_files::FileError),
 }
 
+/// A kernel error (the mesh tensors, a solve) is a network error
+/// ([`mfm_net::NetError::Kernel`]), so it reads "network: ..." like the
+/// other failures of the network.
+impl From<mfm_net::KernelError> for FmError {
+    fn from(e: mfm_net::KernelError) -> Self {
+        Self::Net(e.into())
+    }
+}
+
 impl FmError {
     /// An operating-system error on `path`: [`FmError::Files`] holding
     /// [`mfm_files::FileError::Io`], the one I/O error of every mfm crate.

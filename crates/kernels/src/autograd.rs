@@ -37,7 +37,7 @@ use std::sync::Arc;
 use tch::Tensor;
 use torch_sys::C_tensor;
 
-use crate::error::{NetError, Result};
+use crate::error::{KernelError, Result};
 
 type ForwardFn = unsafe extern "C" fn(
     state: *mut c_void,
@@ -168,7 +168,7 @@ unsafe extern "C" fn forward_trampoline<F: CustomFunction>(
             crate::profile::enabled().then(|| crate::profile::section(format!("fn:{}", f.name())));
         let outs = f.forward(&ins)?;
         if outs.is_empty() || outs.len() > max_outputs as usize {
-            return Err(NetError::CustomOp {
+            return Err(KernelError::CustomOp {
                 op: f.name().to_owned(),
                 message: format!(
                     "forward returned {} outputs (1..={max_outputs} allowed)",
@@ -222,7 +222,7 @@ unsafe extern "C" fn backward_trampoline<F: CustomFunction>(
             .then(|| crate::profile::section(format!("fn:{}^T", f.name())));
         let gi = f.backward(&grads)?;
         if gi.len() != num_inputs as usize {
-            return Err(NetError::CustomOp {
+            return Err(KernelError::CustomOp {
                 op: f.name().to_owned(),
                 message: format!(
                     "backward returned {} gradients for {num_inputs} inputs",
@@ -324,7 +324,7 @@ pub fn apply_custom<F: CustomFunction>(f: F, inputs: &[&Tensor]) -> Result<Vec<T
         let msg = unsafe { std::ffi::CStr::from_ptr(err.as_ptr()) }
             .to_string_lossy()
             .into_owned();
-        return Err(NetError::CustomOp {
+        return Err(KernelError::CustomOp {
             op: name,
             message: msg,
         });
@@ -364,7 +364,7 @@ impl CustomFunction for LinearNode {
     }
 
     fn forward(&mut self, inputs: &[Tensor]) -> Result<Vec<Tensor>> {
-        let x = inputs.first().ok_or_else(|| NetError::CustomOp {
+        let x = inputs.first().ok_or_else(|| KernelError::CustomOp {
             op: self.name.clone(),
             message: "no input".into(),
         })?;
@@ -379,7 +379,7 @@ impl CustomFunction for LinearNode {
     }
 
     fn backward(&mut self, grad_outputs: &[Tensor]) -> Result<Vec<Option<Tensor>>> {
-        let g = grad_outputs.first().ok_or_else(|| NetError::CustomOp {
+        let g = grad_outputs.first().ok_or_else(|| KernelError::CustomOp {
             op: self.name.clone(),
             message: "no output gradient".into(),
         })?;
@@ -426,7 +426,7 @@ pub fn apply_linear(op: &Arc<dyn LinearOperator>, x: &Tensor, adjoint: bool) -> 
         name,
     };
     let mut out = apply_custom(node, &[x])?;
-    out.pop().ok_or_else(|| NetError::CustomOp {
+    out.pop().ok_or_else(|| KernelError::CustomOp {
         op: op.name().to_owned(),
         message: "no output".into(),
     })

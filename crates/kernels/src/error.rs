@@ -1,11 +1,11 @@
-//! The one error type of the kernels and of the network (`mfm-net`).
+//! The error of the kernels: libtorch, the sparse solve, the mesh operators
+//! and the tensors passed in. `mfm-net`'s `NetError` holds it beside the
+//! network's own errors (configuration, weights files).
 
-use std::path::PathBuf;
-
-/// Everything that can go wrong building, running, saving or loading a
-/// PoissonNet.
+/// Everything that can go wrong building or running a kernel or a mesh
+/// operator as a tensor operation.
 #[derive(Debug, thiserror::Error)]
-pub enum NetError {
+pub enum KernelError {
     /// An error reported by libtorch (through tch).
     #[error("libtorch: {0}")]
     Torch(#[from] tch::TchError),
@@ -33,9 +33,6 @@ pub enum NetError {
         /// The element type that was passed.
         kind: tch::Kind,
     },
-    /// An invalid configuration value.
-    #[error("invalid configuration: {0}")]
-    Config(String),
     /// A custom autograd operation failed (forward or backward).
     #[error("custom op {op}: {message}")]
     CustomOp {
@@ -44,43 +41,19 @@ pub enum NetError {
         /// What went wrong.
         message: String,
     },
-    /// Reading or writing a file failed.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
-    /// A configuration file could not be parsed or written.
-    #[error("{path}: {source}")]
-    Json {
-        /// The file.
-        path: PathBuf,
-        /// The JSON error.
-        source: serde_json::Error,
-    },
-    /// A weights file does not match the network it is loaded into.
-    #[error("weights file {path} does not match the network: {detail}")]
-    WeightsMismatch {
-        /// The weights file.
-        path: PathBuf,
-        /// What differs (names, shapes or configuration fields).
-        detail: String,
-    },
 }
 
-/// Result alias of this crate and of `mfm-net`.
-pub type Result<T, E = NetError> = std::result::Result<T, E>;
+/// Result alias of this crate.
+pub type Result<T, E = KernelError> = std::result::Result<T, E>;
 
-/// A [`NetError::Shape`] naming `what`, the expected shape in words and
+/// A [`KernelError::Shape`] naming `what`, the expected shape in words and
 /// `t`'s actual shape.
 pub fn shape_error(
     what: impl Into<String>,
     expected: impl Into<String>,
     t: &tch::Tensor,
-) -> NetError {
-    NetError::Shape {
+) -> KernelError {
+    KernelError::Shape {
         what: what.into(),
         expected: expected.into(),
         found: t.size(),
@@ -89,8 +62,8 @@ pub fn shape_error(
 
 /// The error of a custom operation whose backward pass runs without the
 /// state its forward pass saves.
-pub fn backward_before_forward(op: &str) -> NetError {
-    NetError::CustomOp {
+pub fn backward_before_forward(op: &str) -> KernelError {
+    KernelError::CustomOp {
         op: op.to_owned(),
         message: "backward before forward".into(),
     }

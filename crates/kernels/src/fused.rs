@@ -19,7 +19,7 @@
 use tch::{Device, Kind, Tensor};
 
 use crate::autograd::{CustomFunction, apply_custom, parallel_for};
-use crate::error::{NetError, Result, backward_before_forward, shape_error};
+use crate::error::{KernelError, Result, backward_before_forward, shape_error};
 use crate::{Scalar, SyncPtr};
 
 /// `eps` inside the magnitude of the complex nonlinearity:
@@ -62,7 +62,7 @@ fn first(inputs: &[Tensor], i: usize, op: &str) -> Result<Tensor> {
     inputs
         .get(i)
         .map(Tensor::detach)
-        .ok_or_else(|| NetError::CustomOp {
+        .ok_or_else(|| KernelError::CustomOp {
             op: op.to_owned(),
             message: format!("missing input {i}"),
         })

@@ -26,8 +26,8 @@
 //!   approximations the fused kernels use.
 //! - [`profile`]: per-section timers; [`runtime`]: what the linked
 //!   libtorch offers (threads, CUDA, the allocator setting);
-//!   [`error`]: [`NetError`], the one error type of this crate and of
-//!   `mfm-net`.
+//!   [`error`]: [`KernelError`], the one error type of this crate
+//!   (`mfm-net`'s `NetError` wraps it).
 //!
 //! All kernels write disjoint output rows from libtorch's intra-op threads
 //! through the one pointer wrapper `SyncPtr`, and are generic over the one
@@ -49,7 +49,7 @@ pub mod mesh;
 pub mod profile;
 pub mod runtime;
 
-pub use error::{NetError, Result};
+pub use error::{KernelError, Result};
 pub use mesh::{Backend, MeshTensors};
 
 /// The element types the kernels run on: `f32` and `f64`.

@@ -65,7 +65,7 @@ use mfm_solver::{LaplacianSolver, SOLVE_CHUNK, ShiftOptions};
 use tch::{Device, Kind, Tensor};
 
 use crate::autograd::{LinearOperator, apply_linear, parallel_for};
-use crate::error::{NetError, Result, shape_error};
+use crate::error::{KernelError, Result, shape_error};
 use crate::gather::{GatherKernel, GatherMode, Incidence};
 use crate::{Scalar, SyncPtr};
 
@@ -188,10 +188,13 @@ impl FaceOperator {
     /// Face indices (`[3F]`, i64) and coefficients (`[F, R, 3]`) as tensors on
     /// `device` with element type `kind`.
     fn torch_tables(&self, device: Device, kind: Kind) -> Result<(Tensor, Tensor)> {
-        let mut cache = self.device_cache.lock().map_err(|_| NetError::CustomOp {
-            op: self.name.to_owned(),
-            message: "operator cache poisoned by an earlier panic".into(),
-        })?;
+        let mut cache = self
+            .device_cache
+            .lock()
+            .map_err(|_| KernelError::CustomOp {
+                op: self.name.to_owned(),
+                message: "operator cache poisoned by an earlier panic".into(),
+            })?;
         if let Some((_, _, i, c)) = cache.iter().find(|(d, k, _, _)| *d == device && *k == kind) {
             return Ok((i.shallow_clone(), c.shallow_clone()));
         }
@@ -315,7 +318,7 @@ impl FaceOperator {
                 self.gather(mode, xs, os, nb as usize, c as usize, coef);
             }
             k => {
-                return Err(NetError::Kind {
+                return Err(KernelError::Kind {
                     what: self.name.to_owned(),
                     kind: k,
                 });
@@ -494,7 +497,7 @@ impl PoissonSolveOp {
             Kind::Double => Kind::Double,
             Kind::Float | Kind::Half | Kind::BFloat16 => Kind::Float,
             k => {
-                return Err(NetError::Kind {
+                return Err(KernelError::Kind {
                     what: "Poisson solve".into(),
                     kind: k,
                 });
@@ -622,8 +625,8 @@ impl MeshTensors {
     ///
     /// Cost: the operators (`O(V + F)`) plus one sparse Cholesky factorization.
     ///
-    /// Errors: [`NetError::Operators`] for a degenerate face,
-    /// [`NetError::Solver`] if no shift gives a factorization.
+    /// Errors: [`KernelError::Operators`] for a degenerate face,
+    /// [`KernelError::Solver`] if no shift gives a factorization.
     pub fn new(mesh: &TriMesh) -> Result<Self> {
         Self::with_shift(mesh, &ShiftOptions::default())
     }
@@ -644,7 +647,7 @@ impl MeshTensors {
     ///
     /// Cost: `O(V + F)` copies plus the connected components.
     ///
-    /// Errors: [`NetError::Shape`] when the sizes of `faces`, the operators and
+    /// Errors: [`KernelError::Shape`] when the sizes of `faces`, the operators and
     /// the factor disagree.
     pub fn from_operators(
         faces: &[[u32; 3]],
@@ -653,7 +656,7 @@ impl MeshTensors {
     ) -> Result<Self> {
         let nf = faces.len();
         let nv = ops.mass.len();
-        let bad = |what: &str, expected: String, found: Vec<i64>| NetError::Shape {
+        let bad = |what: &str, expected: String, found: Vec<i64>| KernelError::Shape {
             what: what.into(),
             expected,
             found,

@@ -1,12 +1,15 @@
 //! A coarse profiler for the network's sections: wall-clock and process CPU
 //! time per named section.
 //!
-//! Off by default (one relaxed atomic load per section when off). When on,
-//! [`section`] timers accumulate wall seconds, process CPU seconds (all
-//! threads; on a machine shared with other busy processes this is the
-//! steadier measure of the work) and call counts per name; the benchmark
-//! (`mfm_net::bench`) turns it on to report where a training step spends its
-//! time. On the CPU torch operations are synchronous, so a section's time is
+//! The timers exist only with the crate's `profile` feature ([`AVAILABLE`];
+//! `mfm-net`'s `bench` feature turns it on). Without it every section
+//! compiles to nothing and [`set_enabled`] records nothing. With it the
+//! profiler is still off until [`set_enabled`] (one relaxed atomic load per
+//! section when off); when on, [`section`] timers accumulate wall seconds,
+//! process CPU seconds (all threads; on a machine shared with other busy
+//! processes this is the steadier measure of the work) and call counts per
+//! name; the benchmark (`mfm_net::bench`) turns it on to report where a
+//! training step spends its time. On the CPU torch operations are synchronous, so a section's time is
 //! the time of its operations; on a GPU it only measures the launch unless
 //! the section synchronizes.
 //!
@@ -38,14 +41,20 @@ pub struct SectionTotal {
     pub calls: u64,
 }
 
-/// Turns the profiler on or off (totals are kept; see [`reset`]).
+/// Whether this build has the section timers (the crate's `profile`
+/// feature).
+pub const AVAILABLE: bool = cfg!(feature = "profile");
+
+/// Turns the profiler on or off (totals are kept; see [`reset`]). Without
+/// the `profile` feature ([`AVAILABLE`]) it stays off.
 pub fn set_enabled(on: bool) {
-    ENABLED.store(on, Ordering::Relaxed);
+    ENABLED.store(on && AVAILABLE, Ordering::Relaxed);
 }
 
-/// Whether the profiler is on.
+/// Whether the profiler is on (always `false` without the `profile`
+/// feature, so the compiler removes every section).
 pub fn enabled() -> bool {
-    ENABLED.load(Ordering::Relaxed)
+    AVAILABLE && ENABLED.load(Ordering::Relaxed)
 }
 
 /// Clears the accumulated totals.
@@ -132,5 +141,25 @@ pub fn process_cpu_seconds() -> f64 {
     #[cfg(not(target_os = "linux"))]
     {
         0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sections_record_only_when_built_in_and_on() {
+        set_enabled(false);
+        drop(section("profile-test.off"));
+        set_enabled(true);
+        assert_eq!(enabled(), AVAILABLE);
+        drop(section("profile-test.on"));
+        timed("profile-test.on", || ());
+        set_enabled(false);
+        let totals = totals();
+        let calls = |name: &str| totals.iter().find(|(n, _)| n == name).map(|(_, t)| t.calls);
+        assert_eq!(calls("profile-test.off"), None);
+        assert_eq!(calls("profile-test.on"), AVAILABLE.then_some(2));
     }
 }

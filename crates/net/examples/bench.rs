@@ -1,7 +1,7 @@
 //! Training-step and inference timings of PoissonNet presets on a mesh.
 //!
 //! ```text
-//! cargo run --release -p mfm-net --example bench -- [MESH] [--preset NAME] [--batch B]
+//! cargo run --release -p mfm-net --features bench --example bench -- [MESH] [--preset NAME] [--batch B]
 //!     [--steps S] [--warmup W] [--threads T] [--profile]
 //! ```
 //! `MESH` defaults to `../shared/meshes/bunny.off` and falls back to

@@ -16,9 +16,9 @@ use tch::nn::OptimizerConfig;
 use tch::{Device, Kind, Tensor, nn};
 
 use crate::config::PoissonNetConfig;
+use crate::error::{NetError, Result};
 use crate::loss::flow_matching_loss;
 use crate::model::PoissonNet;
-use mfm_kernels::error::{NetError, Result};
 use mfm_kernels::mesh::MeshTensors;
 use mfm_kernels::profile;
 

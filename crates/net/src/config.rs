@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use mfm_kernels::error::{NetError, Result};
+use crate::error::{NetError, Result};
 
 /// Which output head the network ends with.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]

@@ -7,7 +7,8 @@
 //! differentiable Poisson solve, the mesh operators, the dense and fused
 //! kernels, the autograd bridge with its C++ shim) are the
 //! [`mfm_kernels`] crate; the items the network's users need from it are
-//! re-exported here ([`MeshTensors`], [`NetError`], [`runtime`]).
+//! re-exported here ([`MeshTensors`], [`runtime`]); [`NetError`] holds
+//! their [`KernelError`] beside the network's own errors.
 //!
 //! This crate links the libtorch 2.13 shared libraries of the project's
 //! Python environment (see `cargo xtask setup`); its build script embeds an
@@ -19,7 +20,9 @@
 //!   [`config`]: [`PoissonNetConfig`] with the presets `paper`, `medium`,
 //!   `small`.
 //! - [`loss`]: mass- and area-weighted MSE, the flow-matching loss.
-//! - [`mod@bench`]: [`bench::bench_training_step`] (what `mfm net bench` runs).
+//! - `bench` (with the `bench` feature, which also builds the kernels'
+//!   section timers): `bench::bench_training_step`, what `mfm net bench`
+//!   runs. Training and sampling do not need it.
 //!
 //! ## Devices and element types
 //! Everything runs on the CPU; with a CUDA libtorch and a GPU the network and
@@ -69,8 +72,9 @@
 //! Two process settings matter a lot and are the caller's choice:
 //! - [`runtime::tune_allocator`]: without it glibc returns every large
 //!   activation to the kernel and each step pays page faults for all of them
-//!   (measured: 7x slower elementwise products). [`bench::bench_training_step`]
-//!   calls it; training binaries should too, once at start-up.
+//!   (measured: 7x slower elementwise products). The benchmark
+//!   (`bench::bench_training_step`) calls it; training binaries should
+//!   too, once at start-up.
 //! - libtorch's OpenMP workers busy-wait between parallel regions (the
 //!   default policy). On an otherwise idle machine that is the fast choice:
 //!   the small preset's batch-1 inference took 25-27 ms with it and 35-52 ms
@@ -100,12 +104,15 @@
 //! l.backward(); // through both Poisson solves of the forward pass
 //! ```
 
+#[cfg(feature = "bench")]
 pub mod bench;
 pub mod config;
+pub mod error;
 pub mod layers;
 pub mod loss;
 pub mod model;
 
 pub use config::{HeadKind, PRESETS, PoissonNetConfig};
-pub use mfm_kernels::{Backend, MeshTensors, NetError, Result, error, mesh, runtime};
+pub use error::{KernelError, NetError, Result};
+pub use mfm_kernels::{Backend, MeshTensors, mesh, runtime};
 pub use model::{LayerRow, PoissonNet, PoissonNetOutput, Summary};

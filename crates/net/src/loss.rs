@@ -6,8 +6,9 @@
 
 use tch::Tensor;
 
+use crate::error::Result;
+use crate::error::shape_error;
 use crate::model::PoissonNetOutput;
-use mfm_kernels::error::{Result, shape_error};
 use mfm_kernels::mesh::MeshTensors;
 
 /// Mass-weighted mean squared error of vertex signals `a`, `b: [B, V, C]`:

@@ -45,8 +45,8 @@ use tch::nn;
 use tch::{Device, Kind, Tensor};
 
 use crate::config::{HeadKind, PoissonNetConfig};
+use crate::error::{KernelError, NetError, Result, shape_error};
 use crate::layers::{Mlp, PoissonBlock, VectorMlp, dense, linear};
-use mfm_kernels::error::{NetError, Result, shape_error};
 use mfm_kernels::mesh::MeshTensors;
 use mfm_kernels::profile::section;
 
@@ -290,10 +290,11 @@ impl PoissonNet {
             return Err(shape_error(what, expected(), &t));
         }
         if t.kind() != self.kind() {
-            return Err(NetError::Kind {
+            return Err(KernelError::Kind {
                 what: format!("{what} (the parameters are {:?})", self.kind()),
                 kind: t.kind(),
-            });
+            }
+            .into());
         }
         Ok(t)
     }
@@ -312,8 +313,9 @@ impl PoissonNet {
     /// the paper preset at batch 8 on a 3.5k-vertex mesh that is ~126 GFLOP
     /// forward, ~379 per training step.
     ///
-    /// Errors: [`NetError::Shape`] / [`NetError::Kind`] for inputs that do not
-    /// fit the mesh or the configuration, solver errors from the solves.
+    /// Errors: [`KernelError::Shape`] / [`KernelError::Kind`] (as
+    /// [`NetError::Kernel`]) for inputs that do not fit the mesh or the
+    /// configuration, solver errors from the solves.
     pub fn forward(
         &self,
         mesh: &MeshTensors,

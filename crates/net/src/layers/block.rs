@@ -3,7 +3,8 @@
 use tch::Tensor;
 use tch::nn;
 
-use mfm_kernels::error::{Result, shape_error};
+use crate::error::Result;
+use crate::error::shape_error;
 use mfm_kernels::mesh::MeshTensors;
 use mfm_kernels::profile::section;
 

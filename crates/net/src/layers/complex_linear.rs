@@ -3,7 +3,8 @@
 use tch::Tensor;
 use tch::nn;
 
-use mfm_kernels::error::{Result, shape_error};
+use crate::error::Result;
+use crate::error::shape_error;
 use mfm_kernels::mesh::MeshTensors;
 
 /// Complex linear map `z -> W z` on face features, `W = W_re + i W_im`
@@ -32,7 +33,7 @@ impl ComplexLinear {
     /// Applies the layer to `[B, 2F, C_in]`, giving `[B, 2F, C_out]`
     /// ([`mfm_kernels::dense::complex_linear`]: three real products per call).
     pub fn forward(&self, g: &Tensor) -> Result<Tensor> {
-        mfm_kernels::dense::complex_linear(g, &self.weight)
+        Ok(mfm_kernels::dense::complex_linear(g, &self.weight)?)
     }
 
     /// `divergence(forward(g))` computed on vertices:
@@ -70,6 +71,6 @@ impl ComplexLinear {
             }
             None => w,
         };
-        mfm_kernels::dense::linear(&pq, &w, None)
+        Ok(mfm_kernels::dense::linear(&pq, &w, None)?)
     }
 }

@@ -3,7 +3,7 @@
 use tch::Tensor;
 use tch::nn;
 
-use mfm_kernels::error::Result;
+use crate::error::Result;
 
 use super::{dense, gelu, linear};
 

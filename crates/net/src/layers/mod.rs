@@ -24,7 +24,7 @@ pub use vector_mlp::VectorMlp;
 
 use tch::{Tensor, nn};
 
-use mfm_kernels::error::Result;
+use crate::error::Result;
 
 pub(crate) fn linear(p: nn::Path<'_>, input: usize, output: usize) -> nn::Linear {
     // PyTorch's default initialization of nn.Linear
@@ -45,7 +45,7 @@ pub(crate) fn linear(p: nn::Path<'_>, input: usize, output: usize) -> nn::Linear
 
 /// Applies an `nn::Linear` through [`mfm_kernels::dense::linear`].
 pub(crate) fn dense(l: &nn::Linear, x: &Tensor) -> Result<Tensor> {
-    mfm_kernels::dense::linear(x, &l.ws, l.bs.as_ref())
+    Ok(mfm_kernels::dense::linear(x, &l.ws, l.bs.as_ref())?)
 }
 
 pub(crate) fn gelu(x: &Tensor) -> Tensor {

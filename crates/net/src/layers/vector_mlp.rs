@@ -3,7 +3,7 @@
 use tch::Tensor;
 use tch::nn;
 
-use mfm_kernels::error::{NetError, Result};
+use crate::error::{NetError, Result};
 use mfm_kernels::mesh::MeshTensors;
 use mfm_kernels::profile::section;
 
