@@ -76,7 +76,9 @@ pub enum Backend {
     #[default]
     Native,
     /// Torch operations (`index_select`, batched `matmul`, `index_add`)
-    /// everywhere; slower on the CPU, used as an independent reference.
+    /// everywhere; slower on the CPU, used as an independent reference
+    /// (selected with `MeshTensors::with_backend`, a test-only method: the
+    /// crate's `reference` feature).
     Torch,
 }
 
@@ -144,6 +146,7 @@ impl FaceOperator {
         }
     }
 
+    #[cfg(feature = "reference")]
     fn with_backend(&self, backend: Backend) -> Self {
         Self {
             name: self.name,
@@ -779,7 +782,11 @@ impl MeshTensors {
     }
 
     /// The same mesh with another [`Backend`] for `G`, `G^T` and face means
-    /// (the factor and tables are shared).
+    /// (the factor and tables are shared): with [`Backend::Torch`], the
+    /// independent torch path that the tests compare the Rust kernels
+    /// against. Only with the crate's `reference` feature (the crate's own
+    /// tests turn it on).
+    #[cfg(feature = "reference")]
     pub fn with_backend(&self, backend: Backend) -> Self {
         let ops = self
             .face_ops
