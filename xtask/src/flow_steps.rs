@@ -104,6 +104,7 @@ impl KindResult {
 }
 
 /// The bump-fit numbers of one set in an `mfm eval` report (`quality`).
+#[derive(Clone, Debug)]
 pub struct Quality {
     /// q1, median, q3 of the residual.
     pub residual: [f64; 3],
@@ -142,6 +143,33 @@ impl Quality {
     /// The reference set's numbers.
     pub fn reference_of(metrics: &Value) -> Self {
         Self::set(&metrics["quality"]["reference"], f64::NAN, 1.0)
+    }
+}
+
+impl Mfm<'_> {
+    /// The demo's GMM data in `data` (`n` training signals on the built-in
+    /// blob, 100 reference signals on its half-refined remeshing, seed 0),
+    /// made unless a complete one is there (an incomplete one is replaced).
+    pub fn ensure_gmm_dataset(&self, data: &Path, n: usize) -> Result<()> {
+        if data.join("reference/mesh.ply").is_file() {
+            return Ok(());
+        }
+        if data.exists() {
+            std::fs::remove_dir_all(data)
+                .with_context(|| format!("cannot remove the incomplete {}", data.display()))?;
+        }
+        self.run(&[
+            "dataset",
+            "gmm",
+            "--out",
+            &arg(data),
+            "--n",
+            &n.to_string(),
+            "--reference",
+            "100",
+            "--seed",
+            "0",
+        ])
     }
 }
 

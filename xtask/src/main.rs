@@ -34,7 +34,9 @@ mod figures_deform;
 mod figures_gmm;
 mod flow_steps;
 mod no_network;
+mod pretrain;
 mod pyenv;
+mod time_to_quality;
 mod visual_check;
 
 use anyhow::{Context, Result, bail};
@@ -85,9 +87,23 @@ enum Cmd {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
+    /// Train and install a pretrained model shipped in fixtures/pretrained.
+    #[command(subcommand)]
+    Pretrain(PretrainCmd),
+    /// Sample quality against training time: the demo's GMM experiment
+    /// trained per network size (and recipe variant) for a time budget,
+    /// sampled and evaluated at log-spaced checkpoints; resumable.
+    TimeToQuality(time_to_quality::TimeToQualityArgs),
     /// Render the PLY files under DIR offscreen with pyvista into PNG contact
     /// sheets (one per folder; signals as colors, plain meshes shaded).
     VisualCheck(visual_check::VisualCheckArgs),
+}
+
+#[derive(Subcommand)]
+enum PretrainCmd {
+    /// The demo's GMM model on the built-in blob
+    /// (fixtures/pretrained/gmm-blob/), sampled first by `cargo xtask demo`.
+    Gmm(pretrain::PretrainArgs),
 }
 
 #[derive(Subcommand)]
@@ -244,6 +260,14 @@ fn main() -> Result<()> {
                 "-D",
                 "warnings",
             ]))
+        }
+        Cmd::Pretrain(PretrainCmd::Gmm(args)) => {
+            let env = pyenv::ensure()?;
+            pretrain::gmm(&env, &args)
+        }
+        Cmd::TimeToQuality(args) => {
+            let env = pyenv::ensure()?;
+            time_to_quality::run(&env, &args)
         }
         Cmd::Demo { out } => {
             let env = pyenv::ensure()?;

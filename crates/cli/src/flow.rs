@@ -108,6 +108,15 @@ pub struct SampleArgs {
     /// How many samples to also write as PLY files.
     #[arg(long, default_value_t = 4)]
     pub(crate) ply: usize,
+    /// Sample from the run's checkpoint of this step (its weight average
+    /// when the run has one) instead of its final model: the snapshots
+    /// `train.keep_at` keeps, for curves of quality against training.
+    #[arg(long)]
+    pub(crate) step: Option<u64>,
+    /// With --step: the checkpoint's trained weights, not its weight
+    /// average (runs with train.ema keep both).
+    #[arg(long, requires = "step")]
+    pub(crate) raw_weights: bool,
     /// Write into a non-empty --out folder: replaces only what `mfm sample`
     /// writes (samples.npy, mesh.ply, samples.png, timing.json,
     /// sample_NNN.ply, stale ones of an earlier run included).
@@ -230,6 +239,12 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     }
     check_output_folder(&a.out, a.force, &SAMPLE_FILES)?;
     if crate::arbitrary::is_arbitrary_run(&a.run) {
+        if a.step.is_some() {
+            bail!(
+                "--step samples a flow run's checkpoint; {} is an arbitrary-source run, which samples its final model",
+                a.run.display()
+            );
+        }
         return crate::arbitrary::sample(&a);
     }
     let Some(mesh_arg) = a.mesh.as_deref() else {
@@ -239,7 +254,30 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         );
     };
     let mesh = load_mesh_checked(mesh_arg)?;
-    let sampler = Sampler::load(&a.run, Some(a.device.resolve()?))?;
+    let device = Some(a.device.resolve()?);
+    let sampler = match a.step {
+        None => Sampler::load(&a.run, device)?,
+        Some(step) => {
+            let dir = mfm_fm::checkpoint::checkpoint_dir(&a.run, step);
+            if !dir.is_dir() {
+                let have: Vec<String> = mfm_fm::checkpoint::list_checkpoints(&a.run)?
+                    .iter()
+                    .map(|c| c.step.to_string())
+                    .collect();
+                bail!(
+                    "--step {step}: {} has no checkpoint of that step (it has {}); \
+                     train.keep_at keeps checkpoints of chosen steps",
+                    a.run.display(),
+                    if have.is_empty() {
+                        "none".to_owned()
+                    } else {
+                        have.join(", ")
+                    }
+                );
+            }
+            Sampler::load_checkpoint_weights(&dir, device, !a.raw_weights)?
+        }
+    };
     for w in sampler.surface_warnings(&mesh) {
         eprintln!(
             "warning: {mesh_arg}: {w}; the run's frame assumes the sampling mesh is the training surface in the dataset's units"

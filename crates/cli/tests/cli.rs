@@ -29,6 +29,30 @@ fn train_with_config(dir: &Path, config: &str) -> Output {
     ])
 }
 
+#[cfg(feature = "network")]
+/// `mfm dataset gmm` of `n` training and `reference` reference signals on
+/// the small built-in blob into `DIR/data` (wide bumps, so they fit).
+fn small_gmm_dataset(dir: &Path, n: usize, reference: usize) -> Output {
+    let out = dir.join("data").to_string_lossy().into_owned();
+    let (n, reference) = (n.to_string(), reference.to_string());
+    mfm(&[
+        "dataset",
+        "gmm",
+        "--mesh",
+        "builtin:blob:2",
+        "--out",
+        &out,
+        "--n",
+        &n,
+        "--reference",
+        &reference,
+        "--sigma",
+        "0.1",
+        "--min-separation",
+        "2",
+    ])
+}
+
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
@@ -498,22 +522,7 @@ fn read_npy_f32(path: &Path) -> (Vec<u64>, Vec<f32>) {
 fn gmm_dataset_train_sample_eval_end_to_end() {
     let dir = tempfile::tempdir().unwrap();
     let p = |s: &str| dir.path().join(s).to_string_lossy().into_owned();
-    let o = mfm(&[
-        "dataset",
-        "gmm",
-        "--mesh",
-        "builtin:blob:2",
-        "--out",
-        &p("data"),
-        "--n",
-        "12",
-        "--reference",
-        "6",
-        "--sigma",
-        "0.1",
-        "--min-separation",
-        "2",
-    ]);
+    let o = small_gmm_dataset(dir.path(), 12, 6);
     assert!(o.status.success(), "{}", stderr(&o));
     for f in [
         "train/signals.npy",
@@ -1089,4 +1098,88 @@ fn pairs_dataset_predictor_and_arbitrary_source_flow_end_to_end() {
         &p("y"),
     ]);
     assert!(!o.status.success());
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn kept_snapshots_sample_by_step_with_or_without_the_weight_average() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |s: &str| dir.path().join(s).to_string_lossy().into_owned();
+    let o = small_gmm_dataset(dir.path(), 8, 4);
+    assert!(o.status.success(), "{}", stderr(&o));
+    // clean-signal prediction, a weight average and a kept snapshot off the
+    // checkpoint grid
+    let config = "[model]\npreset = \"small\"\nwidth = 8\nblocks = 1\nvector_layers = 1\n\
+                  prediction = \"clean\"\n\
+                  [train]\nsteps = 6\nbatch = 2\ncheckpoint_every = 3\nkeep_checkpoints = 1\n\
+                  log_every = 1\nema = 0.5\nkeep_at = [1]\njacobian_weight = 0.5\n\
+                  time = \"late:2\"\n[sample]\nsteps = 2\n";
+    let o = train_with_config(dir.path(), config);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let flow = std::fs::read_to_string(dir.path().join("run/flow.json")).unwrap();
+    assert!(flow.contains("\"prediction\": \"clean\""), "{flow}");
+    let mesh = p("data/reference/mesh.ply");
+    let run = p("run");
+    let sample = |out: &str, extra: &[&str]| {
+        let out = p(out);
+        let mut args = vec![
+            "sample", "--run", &run, "--mesh", &mesh, "--n", "2", "--out", &out, "--ply", "0",
+        ];
+        args.extend_from_slice(extra);
+        mfm(&args)
+    };
+    let avg = sample("s_avg", &["--step", "1"]);
+    assert!(avg.status.success(), "{}", stderr(&avg));
+    let raw = sample("s_raw", &["--step", "1", "--raw-weights"]);
+    assert!(raw.status.success(), "{}", stderr(&raw));
+    let (_, a) = read_npy_f32(&dir.path().join("s_avg/samples.npy"));
+    let (_, r) = read_npy_f32(&dir.path().join("s_raw/samples.npy"));
+    assert!(a.iter().all(|x| x.is_finite()) && r.iter().all(|x| x.is_finite()));
+    assert_ne!(a, r, "the average and the trained weights sample alike");
+    let fin = sample("s_final", &[]);
+    assert!(fin.status.success(), "{}", stderr(&fin));
+    // a step without a checkpoint names the ones there are
+    let missing = sample("s_missing", &["--step", "4"]);
+    assert!(!missing.status.success());
+    let e = stderr(&missing);
+    assert!(e.contains("--step 4") && e.contains("1, 6"), "{e}");
+    assert!(!dir.path().join("s_missing").exists());
+    // --raw-weights needs --step
+    let bare = sample("s_bare", &["--raw-weights"]);
+    assert!(!bare.status.success());
+    assert!(stderr(&bare).contains("--step"), "{}", stderr(&bare));
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn the_shipped_pretrained_model_loads_and_samples() {
+    // fixtures/pretrained/gmm-blob is what `cargo xtask demo` samples first:
+    // its checksums hold and it samples the built-in blob it was trained on
+    let run = fixtures().join("pretrained/gmm-blob");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("s");
+    let o = mfm(&[
+        "sample",
+        "--run",
+        &run.to_string_lossy(),
+        "--mesh",
+        "builtin:blob",
+        "--n",
+        "2",
+        "--steps",
+        "4",
+        "--out",
+        &out.to_string_lossy(),
+        "--ply",
+        "0",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (shape, values) = read_npy_f32(&out.join("samples.npy"));
+    assert_eq!((shape[0], shape[2]), (2, 1));
+    assert!(values.iter().all(|x| x.is_finite()));
+    // a bump field: values between about 0 and about 1
+    let max = values.iter().copied().fold(f32::MIN, f32::max);
+    assert!(max > 0.3 && max < 2.0, "peak {max}");
+    let flow = std::fs::read_to_string(run.join("flow.json")).unwrap();
+    assert!(flow.contains("\"centered\": true"), "{flow}");
 }

@@ -12,11 +12,13 @@
 //!       model.safetensors    network weights
 //!       model.json           network configuration (PoissonNetConfig)
 //!       optimizer.safetensors Adam moments `m.<variable>`, `v.<variable>`
+//!       ema.safetensors      the weight average (runs with train.ema; + ema.json)
 //!       config.toml          copy of the run configuration
 //!       flow.json            copy of the flow spec
 //!       state.json           CheckpointState: step, seed, log accumulators,
 //!                            size and CRC-32 of every other file
-//!   model.safetensors        the final model (when training finished)
+//!   model.safetensors        the final model (when training finished; the
+//!                            weight average for runs with train.ema)
 //!   model.json
 //!   model.state.json         size and CRC-32 of the two files above
 //! ```
@@ -47,6 +49,9 @@ pub const FLOW_FILE: &str = "flow.json";
 pub const WEIGHTS_FILE: &str = "model.safetensors";
 /// Network configuration (JSON), written next to the weights.
 pub const NET_CONFIG_FILE: &str = "model.json";
+/// The moving average of the weights (safetensors), in checkpoints of runs
+/// with `train.ema` (with its `ema.json`).
+pub const EMA_FILE: &str = "ema.safetensors";
 /// Adam state (safetensors).
 pub const OPTIMIZER_FILE: &str = "optimizer.safetensors";
 /// [`FinalModelRecord`] (JSON): checksums of the final model.
@@ -102,6 +107,31 @@ pub struct FlowSpec {
     /// whose sampling mesh is not that surface (or not in those units).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub training_surface: Option<SurfaceSize>,
+    /// What the network's vertex output is
+    /// ([`ModelConfig::prediction`](crate::config::ModelConfig::prediction));
+    /// the velocity for runs written before the choice existed.
+    #[serde(default, skip_serializing_if = "Prediction::is_velocity")]
+    pub prediction: Prediction,
+}
+
+/// What a flow network predicts.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Prediction {
+    /// The velocity `v(x_t, t)` itself (the paper's).
+    #[default]
+    Velocity,
+    /// The clean signal `x1_hat(x_t, t)`; the velocity is
+    /// `(x1_hat - x_t) / (1 - t)`. The NJF head's Jacobian output is then
+    /// the predicted signal's gradient.
+    Clean,
+}
+
+impl Prediction {
+    /// `true` for [`Prediction::Velocity`].
+    pub fn is_velocity(&self) -> bool {
+        *self == Self::Velocity
+    }
 }
 
 impl FlowSpec {
@@ -535,10 +565,26 @@ pub fn write_checkpoint(
 /// # Errors
 /// [`FmError::Files`] (`Io`) naming the folder that could not be removed.
 pub fn prune_checkpoints(run_dir: &Path, keep: usize) -> Result<Vec<PathBuf>> {
-    let all = list_checkpoints(run_dir)?;
-    let n = all.len().saturating_sub(keep.max(1));
+    prune_checkpoints_keeping(run_dir, keep, &[])
+}
+
+/// [`prune_checkpoints`] that also keeps the checkpoints of the steps
+/// `snapshots` (`train.keep_at`), which do not count towards `keep`.
+///
+/// # Errors
+/// As [`prune_checkpoints`].
+pub fn prune_checkpoints_keeping(
+    run_dir: &Path,
+    keep: usize,
+    snapshots: &[u64],
+) -> Result<Vec<PathBuf>> {
+    let rolling: Vec<CheckpointInfo> = list_checkpoints(run_dir)?
+        .into_iter()
+        .filter(|c| !snapshots.contains(&c.step))
+        .collect();
+    let n = rolling.len().saturating_sub(keep.max(1));
     let mut removed = Vec::new();
-    for c in all.into_iter().take(n) {
+    for c in rolling.into_iter().take(n) {
         std::fs::remove_dir_all(&c.dir).map_err(|e| FmError::io(&c.dir, e))?;
         removed.push(c.dir);
     }

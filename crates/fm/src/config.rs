@@ -186,7 +186,22 @@ pub struct ModelConfig {
     /// constant). For the linear head, whose output can carry a mean, only
     /// with centring.
     pub mean_offset: bool,
+    /// What the network outputs: `velocity` (default, the paper's) or
+    /// `clean`, the clean signal `x1_hat`, from which the velocity is
+    /// `(x1_hat - x_t) / (1 - t)`. The loss stays in velocity space:
+    /// `|x1_hat - x1|^2 / (1 - t)^2`, the weight clipped at
+    /// [`CLEAN_WEIGHT_MAX`], for the vertex and the Jacobian terms alike.
+    /// Needs `train.center` (the velocity offset of uncentred runs has no
+    /// clean-signal form).
+    pub prediction: crate::checkpoint::Prediction,
 }
+
+/// `train.ema` of the `cpu` preset.
+pub const CPU_EMA: f64 = 0.999;
+
+/// Largest loss weight `1 / (1 - t)^2` of clean-signal prediction
+/// ([`ModelConfig::prediction`]): reached at `t = 0.9`.
+pub const CLEAN_WEIGHT_MAX: f64 = 100.0;
 
 impl Default for ModelConfig {
     fn default() -> Self {
@@ -199,6 +214,7 @@ impl Default for ModelConfig {
             modulation: true,
             condition_on_xyz: false,
             mean_offset: true,
+            prediction: crate::checkpoint::Prediction::Velocity,
         }
     }
 }
@@ -387,7 +403,10 @@ pub mod noise_kind_string {
 /// In TOML: `{ milestones = [[STEP, LR], ...] }` (from step `STEP` on, the
 /// rate is `LR`; steps ascending; an empty list is a constant rate) or
 /// `{ decay = FACTOR, at = [STEP, ...] }` (the base rate times
-/// `FACTOR^(number of listed steps <= step)`). Steps count from 0.
+/// `FACTOR^(number of listed steps <= step)`) or `{ warmup = W, cosine =
+/// END, floor = LR }` (linear warm-up over the first `W` steps, then a
+/// half cosine from the base rate down to `LR` at step `END`, `LR` after).
+/// Steps count from 0.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "LrScheduleRepr", into = "LrScheduleRepr")]
 pub enum LrSchedule {
@@ -399,6 +418,17 @@ pub enum LrSchedule {
         factor: f64,
         /// The steps.
         at: Vec<u64>,
+    },
+    /// Step `s < warmup`: `base (s + 1) / warmup`; then
+    /// `floor + (base - floor) (1 + cos(pi (s - warmup) / (end - warmup))) / 2`
+    /// until `end`, and `floor` from `end` on.
+    Cosine {
+        /// Warm-up steps (0: none).
+        warmup: u64,
+        /// The step the cosine reaches `floor` (`> warmup`).
+        end: u64,
+        /// The final rate (`>= 0`).
+        floor: f64,
     },
 }
 
@@ -427,6 +457,16 @@ impl LrSchedule {
                 let n = at.iter().filter(|&&s| s <= step).count();
                 base * factor.powi(n as i32)
             }
+            Self::Cosine { warmup, end, floor } => {
+                if step < *warmup {
+                    base * (step + 1) as f64 / *warmup as f64
+                } else if step >= *end {
+                    *floor
+                } else {
+                    let f = (step - warmup) as f64 / (end - warmup) as f64;
+                    floor + (base - floor) * 0.5 * (1.0 + (std::f64::consts::PI * f).cos())
+                }
+            }
         }
     }
 
@@ -454,6 +494,18 @@ impl LrSchedule {
                     return Err("decay steps `at` must be strictly ascending".into());
                 }
             }
+            Self::Cosine { warmup, end, floor } => {
+                if end <= warmup {
+                    return Err(format!(
+                        "cosine: `cosine` (the end step, {end}) must be above `warmup` ({warmup})"
+                    ));
+                }
+                if !(floor.is_finite() && *floor >= 0.0) {
+                    return Err(format!(
+                        "cosine: `floor` must be finite and >= 0, found {floor}"
+                    ));
+                }
+            }
         }
         Ok(())
     }
@@ -469,12 +521,36 @@ struct LrScheduleRepr {
     decay: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     at: Option<Vec<u64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    warmup: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    cosine: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    floor: Option<f64>,
 }
 
 impl TryFrom<LrScheduleRepr> for LrSchedule {
     type Error = String;
 
     fn try_from(r: LrScheduleRepr) -> std::result::Result<Self, String> {
+        if r.warmup.is_some() || r.cosine.is_some() || r.floor.is_some() {
+            if r.milestones.is_some() || r.decay.is_some() || r.at.is_some() {
+                return Err(
+                    "lr_schedule: `warmup`/`cosine`/`floor` go alone, without `milestones`, `decay` or `at`"
+                        .into(),
+                );
+            }
+            let Some(end) = r.cosine else {
+                return Err("lr_schedule: a cosine schedule needs `cosine = END_STEP`".into());
+            };
+            let s = Self::Cosine {
+                warmup: r.warmup.unwrap_or(0),
+                end,
+                floor: r.floor.unwrap_or(0.0),
+            };
+            s.validate().map_err(|e| format!("lr_schedule: {e}"))?;
+            return Ok(s);
+        }
         let s = match (r.milestones, r.decay, r.at) {
             (Some(m), None, None) => Self::Milestones(m),
             (None, Some(factor), Some(at)) => Self::Decay { factor, at },
@@ -504,11 +580,25 @@ impl From<LrSchedule> for LrScheduleRepr {
                 milestones: Some(m),
                 decay: None,
                 at: None,
+                warmup: None,
+                cosine: None,
+                floor: None,
             },
             LrSchedule::Decay { factor, at } => Self {
                 milestones: None,
                 decay: Some(factor),
                 at: Some(at),
+                warmup: None,
+                cosine: None,
+                floor: None,
+            },
+            LrSchedule::Cosine { warmup, end, floor } => Self {
+                milestones: None,
+                decay: None,
+                at: None,
+                warmup: Some(warmup),
+                cosine: Some(end),
+                floor: Some(floor),
             },
         }
     }
@@ -607,6 +697,146 @@ pub struct TrainConfig {
     /// sampling ([`ModelConfig::mean_offset`]). `false` keeps the raw noise
     /// and targets and adds the mean as a constant velocity instead.
     pub center: bool,
+    /// Decay of an exponential moving average of the weights, the weights
+    /// that sampling uses (default 0: off, the official recipe). After step
+    /// `k` (1-based) every averaged weight `w` becomes `d w + (1 - d) p`
+    /// with `d = min(ema, (1 + k) / (10 + k))` (the usual warm-up, so early
+    /// checkpoints are not dominated by the initial weights) and `p` the
+    /// trained weight. With it on, checkpoints also hold `ema.safetensors`
+    /// and the final `model.safetensors` is the average.
+    pub ema: f64,
+    /// Weight of the Jacobian term of the loss against the vertex term
+    /// (default 1, the official `lambda_g = lambda_v = 1`; 0 drops it). The
+    /// Jacobian term compares gradients, whose magnitudes are about
+    /// `1 / (feature size)` times the values': for bumps a tenth of the
+    /// shape across it is ~100 times the vertex term.
+    pub jacobian_weight: f64,
+    /// How the path time `t` of each training signal is drawn (default
+    /// `uniform`, the official recipe): see [`TimeSampling`].
+    pub time: TimeSampling,
+    /// Steps whose checkpoints are kept whatever `keep_checkpoints` says
+    /// (default none), written even when off the `checkpoint_every` grid:
+    /// snapshots for curves of sample quality against training time.
+    pub keep_at: Vec<u64>,
+}
+
+/// The distribution of the path time `t` in training.
+///
+/// In TOML: `"uniform"`, `"logit-normal"` (mean 0, standard deviation 1),
+/// `"logit-normal:M:S"`, or `"late:P"`. Draws come from the step's own
+/// random stream, so they are a pure function of the seed and the step.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum TimeSampling {
+    /// `t ~ U[0, 1)`.
+    #[default]
+    Uniform,
+    /// `t = sigmoid(m + s z)`, `z ~ N(0, 1)`: more weight on the middle of
+    /// the path, where the velocity is hardest to predict.
+    LogitNormal {
+        /// `m`.
+        mean: f64,
+        /// `s > 0`.
+        std: f64,
+    },
+    /// `t = 1 - (1 - u)^p`, `p > 0`: `p > 1` puts more weight near the data
+    /// end (`t -> 1`), where a sample's detail is decided.
+    Late {
+        /// `p`.
+        power: f64,
+    },
+}
+
+impl TimeSampling {
+    /// Draws one path time in `[0, 1]` from `rng`: one uniform draw for
+    /// `uniform` and `late`, one standard normal (`rand_distr`) for
+    /// `logit-normal`.
+    pub fn draw(&self, rng: &mut impl rand::Rng) -> f64 {
+        match *self {
+            Self::Uniform => rng.random::<f64>(),
+            Self::LogitNormal { mean, std } => {
+                let z: f64 = rng.sample(rand_distr::StandardNormal);
+                1.0 / (1.0 + (-(mean + std * z)).exp())
+            }
+            Self::Late { power } => 1.0 - (1.0 - rng.random::<f64>()).powf(power),
+        }
+    }
+
+    fn validate(&self) -> std::result::Result<(), String> {
+        match *self {
+            Self::Uniform => Ok(()),
+            Self::LogitNormal { mean, std } => {
+                if mean.is_finite() && std.is_finite() && std > 0.0 {
+                    Ok(())
+                } else {
+                    Err(format!(
+                        "logit-normal needs a finite mean and a finite std > 0, found {mean}, {std}"
+                    ))
+                }
+            }
+            Self::Late { power } => {
+                if power.is_finite() && power > 0.0 {
+                    Ok(())
+                } else {
+                    Err(format!("late needs a finite power > 0, found {power}"))
+                }
+            }
+        }
+    }
+}
+
+impl fmt::Display for TimeSampling {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Uniform => f.write_str("uniform"),
+            Self::LogitNormal { mean, std } => write!(f, "logit-normal:{mean}:{std}"),
+            Self::Late { power } => write!(f, "late:{power}"),
+        }
+    }
+}
+
+impl std::str::FromStr for TimeSampling {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        let parts: Vec<&str> = s.trim().split(':').collect();
+        let num = |x: &str| {
+            x.parse::<f64>()
+                .map_err(|_| format!("time sampling {s:?}: {x:?} is not a number"))
+        };
+        let t = match parts.as_slice() {
+            ["uniform"] => Self::Uniform,
+            ["logit-normal"] => Self::LogitNormal {
+                mean: 0.0,
+                std: 1.0,
+            },
+            ["logit-normal", m, sd] => Self::LogitNormal {
+                mean: num(m)?,
+                std: num(sd)?,
+            },
+            ["late", p] => Self::Late { power: num(p)? },
+            _ => {
+                return Err(format!(
+                    "unknown time sampling {s:?}; expected \"uniform\", \"logit-normal\", \"logit-normal:M:S\" or \"late:P\""
+                ));
+            }
+        };
+        t.validate()
+            .map_err(|e| format!("time sampling {s:?}: {e}"))?;
+        Ok(t)
+    }
+}
+
+impl Serialize for TimeSampling {
+    fn serialize<S: Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
+        s.serialize_str(&self.to_string())
+    }
+}
+
+impl<'de> Deserialize<'de> for TimeSampling {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let s = String::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
+    }
 }
 
 /// `[train.augment]`: data augmentation by a random global scale and shift
@@ -654,6 +884,10 @@ impl Default for TrainConfig {
             device: DeviceChoice::Auto,
             augment: Augment::default(),
             center: true,
+            ema: 0.0,
+            jacobian_weight: 1.0,
+            time: TimeSampling::Uniform,
+            keep_at: Vec::new(),
         }
     }
 }
@@ -734,11 +968,13 @@ impl RunConfig {
     ///   40, lr `5e-4` times 0.2 at steps 5k and 140k.
     /// - `cpu`: scalar signals (the GMM experiment) on `W = 16, K = 2,
     ///   nl = 2`, conditioned on `t`, batch 4, 300 steps, lr `2e-3` then
-    ///   `5e-4` from step 200, a checkpoint every 100 steps, `sigma = 3`.
+    ///   `5e-4` from step 200, a checkpoint every 100 steps, `sigma = 3`,
+    ///   the official loss, and sampling with the weight average
+    ///   (`train.ema = 0.999`; docs/BENCHMARKS.md, "Time to quality").
     ///   About a minute of training on two cores at ~2k vertices.
     /// - `cpu-deform`: `cpu` set up as the deformation models: conditioned
     ///   on the source xyz and `t`, 1000 steps with lr `2e-3` then `5e-4`
-    ///   from step 700.
+    ///   from step 700, and no weight average (not measured on shapes).
     ///
     /// # Errors
     /// [`FmError::Config`] naming the known presets.
@@ -781,6 +1017,7 @@ impl RunConfig {
                         lr_schedule: LrSchedule::Milestones(vec![(200, 5e-4)]),
                         checkpoint_every: 100,
                         log_every: 10,
+                        ema: CPU_EMA,
                         ..base.train
                     },
                     ..base
@@ -791,6 +1028,7 @@ impl RunConfig {
                 c.model.condition_on_xyz = true;
                 c.train.steps = 1000;
                 c.train.lr_schedule = LrSchedule::Milestones(vec![(700, 5e-4)]);
+                c.train.ema = 0.0;
                 Ok(c)
             }
             other => Err(FmError::Config(format!(
@@ -865,6 +1103,19 @@ impl RunConfig {
                 t.augment.shift.to_string(),
             );
         }
+        if !(0.0..1.0).contains(&t.ema) {
+            return bad("train.ema", "in [0, 1) (0: off)", t.ema.to_string());
+        }
+        if !(t.jacobian_weight.is_finite() && t.jacobian_weight >= 0.0) {
+            return bad(
+                "train.jacobian_weight",
+                "finite and >= 0",
+                t.jacobian_weight.to_string(),
+            );
+        }
+        t.time
+            .validate()
+            .map_err(|e| FmError::Config(format!("train.time: {e}")))?;
         if self.sample.steps == 0 {
             return bad("sample.steps", "at least 1", "0".into());
         }
@@ -879,6 +1130,11 @@ impl RunConfig {
             if !(x.is_finite() && x > 0.0) {
                 return bad("noise.scale", "finite and > 0", x.to_string());
             }
+        }
+        if self.model.prediction == crate::checkpoint::Prediction::Clean && !t.center {
+            return Err(FmError::Config(
+                "model.prediction = \"clean\" needs train.center = true".into(),
+            ));
         }
         // sizes and head/channel consistency (with one channel as a stand-in)
         self.model.net_config(1)?;
@@ -942,6 +1198,7 @@ pub const RESUMABLE_FIELDS: &[&str] = &[
     "train.steps",
     "train.checkpoint_every",
     "train.keep_checkpoints",
+    "train.keep_at",
     "train.threads",
     "train.device",
 ];
@@ -1057,6 +1314,41 @@ mod tests {
         assert_eq!(d.lr(1.0, 40), 0.2);
         assert!((d.lr(1.0, 200) - 0.04).abs() < 1e-15);
         assert_eq!(LrSchedule::constant().lr(3.0, 1_000_000), 3.0);
+        let c = LrSchedule::Cosine {
+            warmup: 10,
+            end: 110,
+            floor: 0.1,
+        };
+        assert!((c.lr(2.0, 0) - 0.2).abs() < 1e-15);
+        assert!((c.lr(2.0, 9) - 2.0).abs() < 1e-15);
+        assert!((c.lr(2.0, 10) - 2.0).abs() < 1e-15);
+        // half way down the cosine: the mean of base and floor
+        assert!((c.lr(2.0, 60) - 1.05).abs() < 1e-12);
+        assert_eq!(c.lr(2.0, 110), 0.1);
+        assert_eq!(c.lr(2.0, 10_000), 0.1);
+        // monotone after the warm-up
+        let rates: Vec<f64> = (10..=110).map(|s| c.lr(2.0, s)).collect();
+        assert!(rates.windows(2).all(|w| w[1] <= w[0]));
+        // TOML, both ways, and its refusals
+        let t = RunConfig::from_toml_str(
+            "[train]\nlr_schedule = { warmup = 10, cosine = 110, floor = 0.1 }\n",
+            "x.toml",
+        )
+        .unwrap();
+        assert_eq!(t.train.lr_schedule, c);
+        let again = RunConfig::from_toml_str(&t.to_toml_string().unwrap(), "x.toml").unwrap();
+        assert_eq!(again.train.lr_schedule, c);
+        for (bad, says) in [
+            ("{ warmup = 10 }", "needs `cosine"),
+            ("{ warmup = 10, cosine = 10 }", "must be above"),
+            ("{ cosine = 10, floor = -1.0 }", "floor"),
+            ("{ cosine = 10, decay = 0.5, at = [3] }", "go alone"),
+        ] {
+            let e = RunConfig::from_toml_str(&format!("[train]\nlr_schedule = {bad}\n"), "x.toml")
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(says), "{bad}: {e}");
+        }
     }
 
     #[test]

@@ -333,14 +333,34 @@ impl Sampler {
         }
     }
 
-    /// Loads one checkpoint folder after checking its files' checksums.
+    /// Loads one checkpoint folder after checking its files' checksums: its
+    /// weight average (`ema.safetensors`) when it has one, else its weights.
     ///
     /// # Errors
     /// As [`checkpoint::verify_checkpoint`], and network loading errors.
     pub fn load_checkpoint(dir: impl AsRef<Path>, device: Option<Device>) -> Result<Self> {
+        Self::load_checkpoint_weights(dir, device, true)
+    }
+
+    /// [`Sampler::load_checkpoint`] with the choice of weights: the weight
+    /// average when `average` and the checkpoint has one, else the trained
+    /// weights (to compare the two at one step).
+    ///
+    /// # Errors
+    /// As [`Sampler::load_checkpoint`].
+    pub fn load_checkpoint_weights(
+        dir: impl AsRef<Path>,
+        device: Option<Device>,
+        average: bool,
+    ) -> Result<Self> {
         let dir = dir.as_ref();
-        checkpoint::verify_checkpoint(dir)?;
-        Self::load_files(&dir.join(WEIGHTS_FILE), &dir.join(FLOW_FILE), device)
+        let state = checkpoint::verify_checkpoint(dir)?;
+        let weights = if average && state.files.contains_key(checkpoint::EMA_FILE) {
+            checkpoint::EMA_FILE
+        } else {
+            WEIGHTS_FILE
+        };
+        Self::load_files(&dir.join(weights), &dir.join(FLOW_FILE), device)
     }
 
     fn load_files(weights: &Path, flow: &Path, device: Option<Device>) -> Result<Self> {
@@ -593,6 +613,10 @@ impl Sampler {
         let tt = Tensor::full([b], t, (Kind::Float, x.device()));
         let cond = conditioning(&self.flow, &target.xyz, &tt);
         let out = tch::no_grad(|| self.net.forward(&target.mesh, x, Some(&cond)))?;
+        if self.flow.prediction == crate::checkpoint::Prediction::Clean {
+            // v = (x1_hat - x_t) / (1 - t); the ODE never evaluates t = 1
+            return Ok((out.vertex - x) / (1.0 - t).max(1e-6));
+        }
         Ok(match (&self.offset, self.flow.centered) {
             (Some(o), false) => out.vertex + o,
             _ => out.vertex,

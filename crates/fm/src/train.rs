@@ -10,24 +10,30 @@
 //! mesh, all in the frame:
 //! 1. `f_0`: noise on the training mesh (the run's kind, times its scale
 //!    `sigma`: by linearity `solve(L + tau M, sigma sqrt(m) n)`),
-//!    `t ~ U[0, 1)` per batch item;
+//!    `t ~ U[0, 1)` per batch item (or another `train.time` distribution);
 //! 2. with `train.center` (the default), `f_0` and `f_1` each minus its
 //!    mass-weighted mean per channel and connected component;
 //! 3. `f_t = (1 - t) f_0 + t f_1`, target `delta = f_1 - f_0`;
 //! 4. `(v, J) = net(f_t | t [, source xyz])`, `v` plus the run's constant
 //!    velocity offset when not centring;
-//! 5. loss: [`mfm_net::loss::flow_matching_loss`] (mass-weighted MSE of `v`
-//!    against `delta` plus area-weighted MSE of `J` against `G delta`);
+//! 5. loss: [`mfm_net::loss::weighted_flow_matching_loss`] (mass-weighted
+//!    MSE of `v` against `delta` plus `train.jacobian_weight` times the
+//!    area-weighted MSE of `J` against `G delta`); for clean-signal
+//!    prediction (`model.prediction = "clean"`, the output read as `f_1`)
+//!    the same loss of `v = (out - f_t) / (1 - t)`, i.e. `|out - f_1|^2 /
+//!    (1 - t)^2` with the weight clipped at
+//!    [`CLEAN_WEIGHT_MAX`](crate::config::CLEAN_WEIGHT_MAX);
 //! 6. backward, clip the global gradient norm, one [`Adam`] step at the
-//!    scheduled learning rate. Everything is `f32`.
+//!    scheduled learning rate, then (with `train.ema`) the weight average
+//!    moves towards the new weights. Everything is `f32`.
 //!
 //! ## Determinism and resuming
 //! Every random choice is a pure function of the seed and the step `s`:
 //! - batch: positions `s B .. s B + B` of an endless sequence of epochs, each
 //!   a permutation of the dataset drawn from the ChaCha8 stream `e` of a key
 //!   derived from `(seed, "epoch")`;
-//! - times: `B` uniform `f32` from stream `s` of a key derived from
-//!   `(seed, "time")`;
+//! - times: `B` draws from stream `s` of a key derived from `(seed,
+//!   "time")` (uniform `f32`, or `train.time`'s distribution);
 //! - noise: samples `s B .. s B + B` of the noise sequence of `seed`
 //!   (`NoiseSampler::sample_range_f32`), which do not depend on the batch;
 //! - initial weights: libtorch's generator seeded with `seed` (under a
@@ -78,10 +84,12 @@ use tch::{Device, Tensor};
 
 pub use crate::adam::Adam;
 use crate::checkpoint::{
-    self, CONFIG_FILE, CheckpointState, FLOW_FILE, FlowSpec, LOG_FILE, LogAccumulator,
-    OPTIMIZER_FILE, WEIGHTS_FILE,
+    self, CONFIG_FILE, CheckpointState, EMA_FILE, FLOW_FILE, FlowSpec, LOG_FILE, LogAccumulator,
+    OPTIMIZER_FILE, Prediction, WEIGHTS_FILE,
 };
-use crate::config::{DeviceChoice, FrameChoice, NoiseScale, RunConfig};
+use crate::config::{
+    CLEAN_WEIGHT_MAX, DeviceChoice, FrameChoice, NoiseScale, RunConfig, TimeSampling,
+};
 use crate::context::MeshContext;
 use crate::error::{FmError, Result};
 use crate::sample::{conditioning, offset_tensor, positions_tensor};
@@ -226,6 +234,8 @@ pub struct Trainer {
     signals: Arc<dyn SignalSource>,
     noise: NoiseSampler,
     net: PoissonNet,
+    /// The moving average of the weights (`train.ema > 0`).
+    ema: Option<PoissonNet>,
     adam: Adam,
     order: EpochOrder,
     step: u64,
@@ -364,6 +374,7 @@ fn resolve_flow(
         positions: frame.positions,
         centered: config.train.center,
         training_surface: Some(frame.size),
+        prediction: config.model.prediction,
     })
 }
 
@@ -626,6 +637,17 @@ impl Trainer {
         let context = MeshContext::new(&framed_mesh, config.noise.kind)?;
         let mut t = Self::build(run_dir, config, flow, &framed_mesh, framed_signals, context)?;
         t.net.load_weights(info.dir.join(WEIGHTS_FILE))?;
+        if let Some(avg) = &mut t.ema {
+            let path = info.dir.join(EMA_FILE);
+            if !path.is_file() {
+                return Err(FmError::format(
+                    &path,
+                    "train.ema is on but the checkpoint has no moving average (it was written \
+                     by a run without train.ema)",
+                ));
+            }
+            avg.load_weights(&path)?;
+        }
         t.adam.load(&info.dir.join(OPTIMIZER_FILE), state.step)?;
         t.step = state.step;
         t.elapsed = state.elapsed_seconds;
@@ -668,11 +690,22 @@ impl Trainer {
         }
         let device = config.train.device.resolve()?;
         let net_config = config.model.net_config(flow.channels)?;
-        let net = {
+        let (net, ema) = {
             let _guard = INIT_LOCK.lock().unwrap_or_else(|p| p.into_inner());
             // libtorch seeds are i64; the bits of the u64 seed are kept
             tch::manual_seed(config.train.seed as i64);
-            PoissonNet::new(&net_config, device)?
+            let net = PoissonNet::new(&net_config, device)?;
+            // the average starts as a copy; building it draws from libtorch's
+            // generator too, so it happens under the same lock (another
+            // thread's seeded initialization must not see those draws)
+            let ema = if config.train.ema > 0.0 {
+                let mut avg = PoissonNet::new(&net_config, device)?;
+                avg.var_store_mut().copy(net.var_store())?;
+                Some(avg)
+            } else {
+                None
+            };
+            (net, ema)
         };
         let t = &config.train;
         let adam = Adam::new(&net, t.adam_beta1, t.adam_beta2, t.adam_eps);
@@ -695,6 +728,7 @@ impl Trainer {
             signals,
             noise,
             net,
+            ema,
             adam,
             order,
             step: 0,
@@ -766,7 +800,11 @@ impl Trainer {
         let b = self.config.train.batch;
         let idx = self.order.indices(step, b);
         let mut rng = derived_rng(self.config.train.seed, PURPOSE_TIME, step);
-        let t: Vec<f32> = (0..b).map(|_| rng.random::<f32>()).collect();
+        let t: Vec<f32> = match self.config.train.time {
+            // the uniform draw stays the f32 one runs have always made
+            TimeSampling::Uniform => (0..b).map(|_| rng.random::<f32>()).collect(),
+            other => (0..b).map(|_| other.draw(&mut rng) as f32).collect(),
+        };
         (idx, t)
     }
 
@@ -841,7 +879,31 @@ impl Trainer {
         if let Some(o) = &self.offset {
             out.vertex = &out.vertex + o;
         }
-        let loss_t = loss::flow_matching_loss(&self.mesh, &out, &delta)?;
+        let jw = self.config.train.jacobian_weight;
+        let loss_t = match self.flow.prediction {
+            Prediction::Velocity => {
+                loss::weighted_flow_matching_loss(&self.mesh, &out, &delta, jw)?
+            }
+            Prediction::Clean => {
+                // |x1_hat - x1|^2 / (1 - t)^2 per item, as the velocity
+                // loss of v = (x1_hat - x_t) / (1 - t): both sides scaled
+                // by the clipped 1 / (1 - t)
+                let scale: Vec<f32> = times
+                    .iter()
+                    .map(|&t| {
+                        (1.0 / (1.0 - f64::from(t)).max(1e-12)).min(CLEAN_WEIGHT_MAX.sqrt()) as f32
+                    })
+                    .collect();
+                let s = Tensor::from_slice(&scale)
+                    .reshape([b as i64, 1, 1])
+                    .to_device(self.device);
+                let scaled = mfm_net::PoissonNetOutput {
+                    vertex: &out.vertex * &s,
+                    jacobian: out.jacobian.as_ref().map(|j| j * &s),
+                };
+                loss::weighted_flow_matching_loss(&self.mesh, &scaled, &(&x1 * &s), jw)?
+            }
+        };
         let loss = loss_t.to_device(Device::Cpu).double_value(&[]);
         if !loss.is_finite() {
             return Err(FmError::Diverged(format!(
@@ -852,11 +914,41 @@ impl Trainer {
         let grad_norm = self.adam.clip_grad_norm(self.config.train.grad_clip)?;
         let lr = self.config.train.lr_at(s);
         self.adam.step(lr)?;
+        self.update_ema(s + 1)?;
         Ok(StepStats {
             loss,
             grad_norm,
             lr,
         })
+    }
+
+    /// Moves the weight average towards the weights after step `k`
+    /// (1-based): `w <- d w + (1 - d) p`, `d = min(ema, (1 + k) / (10 + k))`.
+    fn update_ema(&mut self, k: u64) -> Result<()> {
+        let Some(avg) = &mut self.ema else {
+            return Ok(());
+        };
+        let warm = (1.0 + k as f64) / (10.0 + k as f64);
+        let d = self.config.train.ema.min(warm);
+        let trained = self.net.var_store().variables();
+        tch::no_grad(|| -> Result<()> {
+            for (name, mut w) in avg.var_store().variables() {
+                let p = trained.get(&name).ok_or_else(|| {
+                    FmError::Config(format!(
+                        "the weight average has a variable {name} the network lacks"
+                    ))
+                })?;
+                let _ = w.f_mul_scalar_(d)?;
+                let _ = w.f_add_(&(p * (1.0 - d)))?;
+            }
+            Ok(())
+        })
+    }
+
+    /// The weights sampling uses: the moving average when `train.ema` is
+    /// on, else the trained weights.
+    pub fn sampling_net(&self) -> &PoissonNet {
+        self.ema.as_ref().unwrap_or(&self.net)
     }
 
     /// Writes the checkpoint of the current step and prunes old ones.
@@ -872,13 +964,21 @@ impl Trainer {
             files: BTreeMap::new(),
         };
         let (net, adam, config, flow) = (&self.net, &self.adam, &self.config, &self.flow);
+        let ema = self.ema.as_ref();
         let dir = checkpoint::write_checkpoint(&self.run_dir, state, |tmp| {
             net.save(tmp.join(WEIGHTS_FILE))?;
+            if let Some(avg) = ema {
+                avg.save(tmp.join(EMA_FILE))?;
+            }
             adam.save(&tmp.join(OPTIMIZER_FILE))?;
             config.write_toml_file(tmp.join(CONFIG_FILE))?;
             flow.write(tmp.join(FLOW_FILE))
         })?;
-        checkpoint::prune_checkpoints(&self.run_dir, self.config.train.keep_checkpoints)?;
+        checkpoint::prune_checkpoints_keeping(
+            &self.run_dir,
+            self.config.train.keep_checkpoints,
+            &self.config.train.keep_at,
+        )?;
         self.last_checkpoint_step = Some(self.step);
         Ok(dir)
     }
@@ -972,7 +1072,10 @@ impl Trainer {
                 stats.lr,
                 done / session.elapsed().as_secs_f64().max(1e-9)
             ));
-            if self.step % every == 0 || self.step == total {
+            if self.step % every == 0
+                || self.step == total
+                || self.config.train.keep_at.contains(&self.step)
+            {
                 checkpoint_dir = Some(self.write_checkpoint()?);
             }
         }
@@ -982,7 +1085,7 @@ impl Trainer {
         let finished = self.step >= total;
         let model = if finished {
             let path = self.run_dir.join(WEIGHTS_FILE);
-            self.net.save(&path)?;
+            self.sampling_net().save(&path)?;
             checkpoint::write_final_record(&self.run_dir)?;
             Some(path)
         } else {

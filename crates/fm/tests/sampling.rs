@@ -206,6 +206,7 @@ fn flow(noise: NoiseKind, offset: f64) -> FlowSpec {
         positions: false,
         centered: false,
         training_surface: None,
+        prediction: Default::default(),
     }
 }
 

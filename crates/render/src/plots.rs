@@ -343,6 +343,211 @@ pub fn coefficient_histograms(path: impl AsRef<Path>, panels: &[HistogramPanel])
     write_png(path, &buf, w, h)
 }
 
+/// Size in pixels of one panel of [`curve_grid`].
+pub const CURVE_PANEL_SIZE: (u32, u32) = (620, 440);
+
+/// One line of a [`CurvePanel`]: `(x, y)` points joined in order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Curve {
+    /// Legend text.
+    pub label: String,
+    /// The points; those with a non-finite coordinate (or `x <= 0` on a
+    /// logarithmic axis) are left out.
+    pub points: Vec<(f64, f64)>,
+}
+
+/// One panel of [`curve_grid`]: several curves against a common `x`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CurvePanel {
+    /// Panel title.
+    pub title: String,
+    /// `x` axis title.
+    pub x_label: String,
+    /// `y` axis title.
+    pub y_label: String,
+    /// Logarithmic `x` axis (steps, seconds).
+    pub log_x: bool,
+    /// Horizontal reference lines `(value, label)`, drawn dashed in grey
+    /// (a goal, the data's own value).
+    pub references: Vec<(f64, String)>,
+    /// The curves; the `i`-th curve of every panel has the same colour.
+    pub curves: Vec<Curve>,
+}
+
+/// Writes a PNG of `panels` in a grid of `columns` columns (rows as
+/// needed): each panel's curves as lines with dots at the points, its
+/// reference lines dashed, with axes, tick labels and a legend. The file is
+/// written atomically. Each panel is [`CURVE_PANEL_SIZE`].
+///
+/// # Errors
+/// [`RenderError::Plot`] if `panels` is empty, `columns` is 0, a panel has
+/// no drawable point, or the file cannot be written.
+///
+/// # Example
+/// ```
+/// use mfm_render::plots::{Curve, CurvePanel, curve_grid};
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("curves.png");
+/// let panel = CurvePanel {
+///     title: "residual".into(),
+///     x_label: "steps".into(),
+///     y_label: "median".into(),
+///     log_x: true,
+///     references: vec![(0.35, "goal".into())],
+///     curves: vec![Curve { label: "W16".into(), points: vec![(100.0, 0.9), (1000.0, 0.7)] }],
+/// };
+/// curve_grid(&path, &[panel], 1).unwrap();
+/// assert!(std::fs::metadata(&path).unwrap().len() > 1000);
+/// ```
+pub fn curve_grid(path: impl AsRef<Path>, panels: &[CurvePanel], columns: usize) -> Result<()> {
+    let path = path.as_ref();
+    let fail = |message: String| RenderError::Plot {
+        path: path.to_path_buf(),
+        message,
+    };
+    if panels.is_empty() {
+        return Err(fail("no curve panel to draw".into()));
+    }
+    if columns == 0 {
+        return Err(fail("a curve grid needs at least one column".into()));
+    }
+    let mut ranges = Vec::with_capacity(panels.len());
+    let mut kept: Vec<Vec<Vec<(f64, f64)>>> = Vec::with_capacity(panels.len());
+    for p in panels {
+        let ok = |&(x, y): &(f64, f64)| x.is_finite() && y.is_finite() && (!p.log_x || x > 0.0);
+        let curves: Vec<Vec<(f64, f64)>> = p
+            .curves
+            .iter()
+            .map(|c| c.points.iter().copied().filter(ok).collect())
+            .collect();
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+        for &(x, y) in curves.iter().flatten() {
+            (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+        }
+        if x0 > x1 {
+            return Err(fail(format!("panel {:?} has no point to draw", p.title)));
+        }
+        for (v, _) in p.references.iter().filter(|(v, _)| v.is_finite()) {
+            (y0, y1) = (y0.min(*v), y1.max(*v));
+        }
+        let (x0, x1) = if p.log_x {
+            (x0 / 1.3, x1.max(x0 * 2.0) * 1.3)
+        } else {
+            let pad = ((x1 - x0) * 0.05).max(1e-9);
+            (x0 - pad, x1 + pad)
+        };
+        let pad = ((y1 - y0) * 0.08).max(1e-3 * y1.abs().max(1.0));
+        ranges.push((x0, x1, y0 - pad, y1 + pad));
+        kept.push(curves);
+    }
+    let rows = panels.len().div_ceil(columns);
+    let cols = columns.min(panels.len());
+    let (pw, ph) = CURVE_PANEL_SIZE;
+    let (w, h) = (pw * cols as u32, ph * rows as u32);
+    let mut buf = vec![255u8; (w as usize) * (h as usize) * 3];
+    {
+        let root = Canvas::new(&mut buf, w, h).into_drawing_area();
+        let draw = || -> std::result::Result<(), String> {
+            root.fill(&WHITE).map_err(|e| e.to_string())?;
+            let areas = root.split_evenly((rows, cols));
+            for (k, p) in panels.iter().enumerate() {
+                let (x0, x1, y0, y1) = ranges[k];
+                let mut builder = ChartBuilder::on(&areas[k]);
+                builder
+                    .caption(&p.title, ("sans-serif", 24))
+                    .margin(12)
+                    .x_label_area_size(45)
+                    .y_label_area_size(70);
+                // one closure per axis kind: plotters' log and linear
+                // coordinates are different types
+                macro_rules! body {
+                    ($chart:expr) => {{
+                        let mut chart = $chart;
+                        chart
+                            .configure_mesh()
+                            .x_desc(p.x_label.as_str())
+                            .y_desc(p.y_label.as_str())
+                            .label_style(("sans-serif", 15))
+                            .axis_desc_style(("sans-serif", 16))
+                            .x_label_formatter(&|v| short_number(*v))
+                            .y_label_formatter(&|v| short_number(*v))
+                            .draw()
+                            .map_err(|e| e.to_string())?;
+                        for (v, label) in &p.references {
+                            let grey = RGBColor(120, 120, 120);
+                            let n = 40;
+                            let segments = (0..n).step_by(2).map(|i| {
+                                let at = |j: usize| {
+                                    let f = j as f64 / n as f64;
+                                    if p.log_x {
+                                        (x0.ln() + f * (x1.ln() - x0.ln())).exp()
+                                    } else {
+                                        x0 + f * (x1 - x0)
+                                    }
+                                };
+                                PathElement::new(
+                                    vec![(at(i), *v), (at(i + 1), *v)],
+                                    grey.stroke_width(1),
+                                )
+                            });
+                            chart
+                                .draw_series(segments)
+                                .map_err(|e| e.to_string())?
+                                .label(format!("{label} ({})", short_number(*v)))
+                                .legend(move |(x, y)| {
+                                    PathElement::new(
+                                        vec![(x, y), (x + 20, y)],
+                                        grey.stroke_width(1),
+                                    )
+                                });
+                        }
+                        for (i, (c, pts)) in p.curves.iter().zip(&kept[k]).enumerate() {
+                            let col = color(i);
+                            chart
+                                .draw_series(LineSeries::new(
+                                    pts.iter().copied(),
+                                    col.stroke_width(2),
+                                ))
+                                .map_err(|e| e.to_string())?
+                                .label(c.label.as_str())
+                                .legend(move |(x, y)| {
+                                    PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2))
+                                });
+                            chart
+                                .draw_series(pts.iter().map(|&q| Circle::new(q, 3, col.filled())))
+                                .map_err(|e| e.to_string())?;
+                        }
+                        chart
+                            .configure_series_labels()
+                            .position(SeriesLabelPosition::UpperRight)
+                            .label_font(("sans-serif", 14))
+                            .background_style(WHITE.mix(0.85))
+                            .border_style(BLACK)
+                            .draw()
+                            .map_err(|e| e.to_string())?;
+                    }};
+                }
+                if p.log_x {
+                    body!(
+                        builder
+                            .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
+                            .map_err(|e| e.to_string())?
+                    );
+                } else {
+                    body!(
+                        builder
+                            .build_cartesian_2d(x0..x1, y0..y1)
+                            .map_err(|e| e.to_string())?
+                    );
+                }
+            }
+            root.present().map_err(|e| e.to_string())
+        };
+        draw().map_err(fail)?;
+    }
+    write_png(path, &buf, w, h)
+}
+
 /// Compact tick label: `0`, `12`, `0.25`, `1.5e-3`, `2e4`.
 fn short_number(v: f64) -> String {
     if v == 0.0 {

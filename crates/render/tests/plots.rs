@@ -4,8 +4,8 @@
 
 use mfm_render::RenderError;
 use mfm_render::plots::{
-    HISTOGRAM_PANEL_SIZE, HistogramPanel, VARIANCE_PLOT_SIZE, VarianceSeries,
-    coefficient_histograms, variance_plot,
+    CURVE_PANEL_SIZE, Curve, CurvePanel, HISTOGRAM_PANEL_SIZE, HistogramPanel, VARIANCE_PLOT_SIZE,
+    VarianceSeries, coefficient_histograms, curve_grid, variance_plot,
 };
 
 /// A Matérn-like spectrum `(lambda + tau)^-2` with a deterministic wobble
@@ -93,4 +93,69 @@ fn plot_errors_name_the_problem() {
     );
     // nothing was left behind by the failures
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
+
+fn curve_panel(title: &str, log_x: bool, points: Vec<(f64, f64)>) -> CurvePanel {
+    CurvePanel {
+        title: title.into(),
+        x_label: "steps".into(),
+        y_label: "value".into(),
+        log_x,
+        references: vec![(0.35, "goal".into())],
+        curves: vec![
+            Curve {
+                label: "a".into(),
+                points: points.clone(),
+            },
+            Curve {
+                label: "b".into(),
+                points: points.iter().map(|&(x, y)| (x, y * 0.5)).collect(),
+            },
+        ],
+    }
+}
+
+#[test]
+fn curve_grids_lay_panels_out_in_rows_and_refuse_what_cannot_be_drawn() {
+    let dir = tempfile::tempdir().unwrap();
+    let pts = vec![(100.0, 0.9), (1000.0, 0.6), (10000.0, 0.5)];
+    let p = dir.path().join("curves.png");
+    let panels: Vec<CurvePanel> = (0..5)
+        .map(|i| curve_panel(&format!("panel {i}"), i % 2 == 0, pts.clone()))
+        .collect();
+    curve_grid(&p, &panels, 3).unwrap();
+    let img = image::open(&p).unwrap().to_rgb8();
+    let (w, h) = CURVE_PANEL_SIZE;
+    // 5 panels in 3 columns: two rows
+    assert_eq!(img.dimensions(), (3 * w, 2 * h));
+    assert!(has(&img, [31, 119, 180]) && has(&img, [214, 39, 40]));
+    // the reference line's grey
+    assert!(has(&img, [120, 120, 120]));
+
+    let q = dir.path().join("bad.png");
+    assert!(curve_grid(&q, &[], 2).is_err());
+    assert!(curve_grid(&q, &panels, 0).is_err());
+    // on a log axis, points at x <= 0 are left out: nothing is left here
+    let e = curve_grid(
+        &q,
+        &[curve_panel("empty", true, vec![(0.0, 1.0), (-1.0, 2.0)])],
+        1,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("no point to draw"), "{e}");
+    // a linear axis draws the same points
+    curve_grid(
+        &q,
+        &[curve_panel("linear", false, vec![(0.0, 1.0), (-1.0, 2.0)])],
+        1,
+    )
+    .unwrap();
+    // non-finite values are skipped, not drawn
+    let nan = vec![
+        (1.0, f64::NAN),
+        (2.0, 0.5),
+        (f64::INFINITY, 0.2),
+        (3.0, 0.4),
+    ];
+    curve_grid(&q, &[curve_panel("nan", true, nan)], 1).unwrap();
 }

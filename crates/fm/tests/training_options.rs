@@ -1,0 +1,318 @@
+//! The training options beyond the official recipe: the weight average
+//! (`train.ema`), the time distribution (`train.time`), the Jacobian weight
+//! of the loss (`train.jacobian_weight`) and kept snapshots
+//! (`train.keep_at`): each changes what it says, resumes bit for bit, and
+//! is refused when out of range.
+#![allow(clippy::unwrap_used)]
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use mfm_fm::InMemorySignals;
+use mfm_fm::checkpoint::{self, EMA_FILE, WEIGHTS_FILE};
+use mfm_fm::config::{DeviceChoice, LrSchedule, RunConfig, TimeSampling};
+use mfm_fm::sample::Sampler;
+use mfm_fm::train::Trainer;
+use mfm_geometry::{TriMesh, procedural};
+use proptest::prelude::*;
+use rand::SeedableRng;
+use tch::Tensor;
+
+fn signals(mesh: &TriMesh, count: usize) -> Arc<InMemorySignals> {
+    let v = mesh.num_vertices();
+    let mut data = Vec::with_capacity(count * v);
+    for i in 0..count {
+        for p in mesh.positions() {
+            let a = 1.0 + i as f64;
+            data.push((0.5 + 0.4 * (a * p[0]).sin() * p[2] + 0.2 * (a * p[1]).cos()) as f32);
+        }
+    }
+    Arc::new(InMemorySignals::new(data, count, v, 1).unwrap())
+}
+
+fn tiny(steps: u64) -> RunConfig {
+    let mut c = RunConfig::preset("cpu").unwrap();
+    c.model.width = Some(8);
+    c.model.blocks = Some(1);
+    c.model.vector_layers = Some(2);
+    c.train.steps = steps;
+    c.train.batch = 3;
+    c.train.lr = 1e-2;
+    c.train.lr_schedule = LrSchedule::constant();
+    c.train.checkpoint_every = 4;
+    c.train.log_every = 2;
+    c.train.seed = 5;
+    c.train.threads = 1;
+    c.train.device = DeviceChoice::Cpu;
+    // the official loss and no average, whatever the preset's defaults
+    c.train.ema = 0.0;
+    c.train.jacobian_weight = 1.0;
+    c
+}
+
+fn weights(path: &Path) -> BTreeMap<String, Vec<f32>> {
+    Tensor::read_safetensors(path)
+        .unwrap()
+        .into_iter()
+        .map(|(k, t)| (k, Vec::<f32>::try_from(t.flatten(0, -1)).unwrap()))
+        .collect()
+}
+
+fn bits(w: &BTreeMap<String, Vec<f32>>) -> Vec<u32> {
+    w.values().flatten().map(|x| x.to_bits()).collect()
+}
+
+fn train(dir: &Path, cfg: RunConfig, mesh: &TriMesh, s: Arc<InMemorySignals>, until: u64) {
+    Trainer::new(dir, cfg, mesh, s)
+        .unwrap()
+        .run_until(until, &AtomicBool::new(false), false)
+        .unwrap();
+}
+
+#[test]
+fn the_weight_average_follows_its_recursion_and_resumes_bit_for_bit() {
+    let mesh = procedural::icosphere(1);
+    let s = signals(&mesh, 4);
+    let mut cfg = tiny(12);
+    cfg.train.ema = 0.9;
+
+    // full run; the final model is the average, the checkpoint has both
+    let full = tempfile::tempdir().unwrap();
+    train(full.path(), cfg.clone(), &mesh, s.clone(), 12);
+    let last = checkpoint::checkpoint_dir(full.path(), 12);
+    let avg = weights(&last.join(EMA_FILE));
+    let trained = weights(&last.join(WEIGHTS_FILE));
+    assert_eq!(bits(&weights(&full.path().join(WEIGHTS_FILE))), bits(&avg));
+    assert_ne!(
+        bits(&avg),
+        bits(&trained),
+        "the average is not the trained weights"
+    );
+
+    // the recursion, replayed from the checkpoint of step 8: four more
+    // steps of w <- d w + (1 - d) p with d = min(0.9, (1 + k) / (10 + k));
+    // the trained weights of steps 9..12 come from a run that keeps them all
+    let mut every = cfg.clone();
+    every.train.checkpoint_every = 1;
+    every.train.keep_checkpoints = 20;
+    let dense = tempfile::tempdir().unwrap();
+    train(dense.path(), every, &mesh, s.clone(), 12);
+    let at = |k: u64, f: &str| weights(&checkpoint::checkpoint_dir(dense.path(), k).join(f));
+    let mut w = at(8, EMA_FILE);
+    for k in 9..=12u64 {
+        let d = 0.9f64.min((1.0 + k as f64) / (10.0 + k as f64));
+        let p = at(k, WEIGHTS_FILE);
+        for (name, v) in w.iter_mut() {
+            for (x, y) in v.iter_mut().zip(&p[name]) {
+                *x = (f64::from(*x) * d + f64::from(*y) * (1.0 - d)) as f32;
+            }
+        }
+    }
+    for (name, v) in &avg {
+        for (a, b) in v.iter().zip(&w[name]) {
+            assert!(
+                (a - b).abs() <= 1e-6 * (1.0 + b.abs()),
+                "{name}: {a} vs {b}"
+            );
+        }
+    }
+    // checkpointing every step changed nothing else
+    assert_eq!(bits(&at(12, EMA_FILE)), bits(&avg));
+
+    // stopped at step 6 (off the checkpoint grid) and resumed: bit for bit
+    let stopped = tempfile::tempdir().unwrap();
+    train(stopped.path(), cfg.clone(), &mesh, s.clone(), 6);
+    Trainer::resume(stopped.path(), &mesh, s.clone())
+        .unwrap()
+        .run(&AtomicBool::new(false), false)
+        .unwrap();
+    assert_eq!(
+        bits(&weights(&stopped.path().join(WEIGHTS_FILE))),
+        bits(&avg)
+    );
+
+    // the training itself does not depend on the average
+    let mut plain = cfg.clone();
+    plain.train.ema = 0.0;
+    let p = tempfile::tempdir().unwrap();
+    train(p.path(), plain, &mesh, s.clone(), 12);
+    assert_eq!(bits(&weights(&p.path().join(WEIGHTS_FILE))), bits(&trained));
+    assert!(
+        !checkpoint::checkpoint_dir(p.path(), 12)
+            .join(EMA_FILE)
+            .exists()
+    );
+
+    // sampling a checkpoint uses the average unless asked otherwise
+    let a = Sampler::load_checkpoint(&last, None).unwrap();
+    let r = Sampler::load_checkpoint_weights(&last, None, false).unwrap();
+    let first = |s: &Sampler| {
+        let vars = s.net().var_store().variables();
+        let (_, t) = vars.iter().min_by_key(|(k, _)| k.as_str()).unwrap();
+        Vec::<f32>::try_from(t.flatten(0, -1)).unwrap()
+    };
+    assert_eq!(first(&a), avg.values().next().unwrap().clone());
+    assert_eq!(first(&r), trained.values().next().unwrap().clone());
+
+    // a checkpoint without an average cannot resume a run that has one
+    let mut edited = cfg;
+    edited.train.steps = 30;
+    let broken = tempfile::tempdir().unwrap();
+    train(broken.path(), edited, &mesh, s.clone(), 4);
+    let ck = checkpoint::checkpoint_dir(broken.path(), 4);
+    std::fs::remove_file(ck.join(EMA_FILE)).unwrap();
+    let err = Trainer::resume(broken.path(), &mesh, s).unwrap_err();
+    assert!(err.to_string().contains("ema.safetensors"), "{err}");
+}
+
+#[test]
+fn kept_snapshots_survive_pruning_and_are_written_off_the_grid() {
+    let mesh = procedural::icosphere(1);
+    let s = signals(&mesh, 4);
+    let mut cfg = tiny(16);
+    cfg.train.keep_checkpoints = 1;
+    cfg.train.keep_at = vec![3, 8];
+    let dir = tempfile::tempdir().unwrap();
+    train(dir.path(), cfg, &mesh, s, 16);
+    let steps: Vec<u64> = checkpoint::list_checkpoints(dir.path())
+        .unwrap()
+        .iter()
+        .map(|c| c.step)
+        .collect();
+    // 3 is off the every-4 grid; 8 is on it; 16 is the newest
+    assert_eq!(steps, [3, 8, 16]);
+}
+
+#[test]
+fn time_sampling_and_jacobian_weight_change_the_run_and_resume_bit_for_bit() {
+    let mesh = procedural::icosphere(1);
+    let s = signals(&mesh, 4);
+    let base = tiny(8);
+    let reference = tempfile::tempdir().unwrap();
+    train(reference.path(), base.clone(), &mesh, s.clone(), 8);
+    let reference = bits(&weights(&reference.path().join(WEIGHTS_FILE)));
+    let variants: Vec<(&str, RunConfig)> = vec![
+        ("logit-normal", {
+            let mut c = base.clone();
+            c.train.time = TimeSampling::LogitNormal {
+                mean: 0.0,
+                std: 1.0,
+            };
+            c
+        }),
+        ("late", {
+            let mut c = base.clone();
+            c.train.time = TimeSampling::Late { power: 2.0 };
+            c
+        }),
+        ("jacobian 0", {
+            let mut c = base.clone();
+            c.train.jacobian_weight = 0.0;
+            c
+        }),
+        ("jacobian 0.1", {
+            let mut c = base.clone();
+            c.train.jacobian_weight = 0.1;
+            c
+        }),
+    ];
+    for (name, cfg) in variants {
+        let full = tempfile::tempdir().unwrap();
+        train(full.path(), cfg.clone(), &mesh, s.clone(), 8);
+        let w = bits(&weights(&full.path().join(WEIGHTS_FILE)));
+        assert_ne!(
+            w, reference,
+            "{name} trained the same weights as the default"
+        );
+        let stopped = tempfile::tempdir().unwrap();
+        train(stopped.path(), cfg, &mesh, s.clone(), 5);
+        Trainer::resume(stopped.path(), &mesh, s.clone())
+            .unwrap()
+            .run(&AtomicBool::new(false), false)
+            .unwrap();
+        assert_eq!(
+            bits(&weights(&stopped.path().join(WEIGHTS_FILE))),
+            w,
+            "{name} resumed differently"
+        );
+    }
+    // weight 1 is the official loss exactly
+    let mut one = base;
+    one.train.jacobian_weight = 1.0;
+    let d = tempfile::tempdir().unwrap();
+    train(d.path(), one, &mesh, s, 8);
+    assert_eq!(bits(&weights(&d.path().join(WEIGHTS_FILE))), reference);
+}
+
+#[test]
+fn the_new_fields_parse_default_and_refuse_bad_values() {
+    let c = RunConfig::default();
+    assert_eq!(c.train.ema, 0.0);
+    assert_eq!(c.train.time, TimeSampling::Uniform);
+    assert_eq!(c.train.jacobian_weight, 1.0);
+    assert!(c.train.keep_at.is_empty());
+    let text = "[train]\nema = 0.999\ntime = \"logit-normal:-0.5:0.8\"\njacobian_weight = 0.0\nkeep_at = [100, 1000]\n";
+    let c = RunConfig::from_toml_str(text, "t.toml").unwrap();
+    assert_eq!(c.train.ema, 0.999);
+    assert_eq!(
+        c.train.time,
+        TimeSampling::LogitNormal {
+            mean: -0.5,
+            std: 0.8
+        }
+    );
+    assert_eq!(c.train.jacobian_weight, 0.0);
+    assert_eq!(c.train.keep_at, [100, 1000]);
+    // written and read back
+    let again = RunConfig::from_toml_str(&c.to_toml_string().unwrap(), "t.toml").unwrap();
+    assert_eq!(again, c);
+    for (bad, field) in [
+        ("[train]\nema = 1.0\n", "train.ema"),
+        ("[train]\nema = -0.1\n", "train.ema"),
+        ("[train]\njacobian_weight = -1.0\n", "train.jacobian_weight"),
+        ("[train]\ntime = \"logit-normal:0:0\"\n", "std > 0"),
+        ("[train]\ntime = \"late:-2\"\n", "power > 0"),
+        ("[train]\ntime = \"gaussian\"\n", "unknown time sampling"),
+        ("[train]\ntime = \"late:x\"\n", "not a number"),
+    ] {
+        let e = RunConfig::from_toml_str(bad, "bad.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(field) && e.contains("bad.toml"), "{bad:?}: {e}");
+    }
+    // keep_at may change on resume; ema may not
+    assert!(mfm_fm::config::RESUMABLE_FIELDS.contains(&"train.keep_at"));
+    assert!(!mfm_fm::config::RESUMABLE_FIELDS.contains(&"train.ema"));
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// Every distribution stays in [0, 1]; `late:P` with P > 1 has its mean
+    /// above 1/2 (1 - 1/(P+1)), logit-normal with mean m has its median at
+    /// sigmoid(m).
+    #[test]
+    fn time_draws_stay_in_the_unit_interval_with_the_right_centre(
+        seed in 0u64..1000,
+        power in 1.5f64..4.0,
+        m in -1.0f64..1.0,
+    ) {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let n = 4000;
+        let late: Vec<f64> = (0..n).map(|_| TimeSampling::Late { power }.draw(&mut rng)).collect();
+        prop_assert!(late.iter().all(|t| (0.0..=1.0).contains(t)));
+        let mean = late.iter().sum::<f64>() / n as f64;
+        let expected = 1.0 - 1.0 / (power + 1.0);
+        prop_assert!((mean - expected).abs() < 0.02, "late:{power} mean {mean} vs {expected}");
+        let mut ln: Vec<f64> = (0..n)
+            .map(|_| TimeSampling::LogitNormal { mean: m, std: 1.0 }.draw(&mut rng))
+            .collect();
+        prop_assert!(ln.iter().all(|t| (0.0..=1.0).contains(t)));
+        ln.sort_by(f64::total_cmp);
+        let median = ln[n / 2];
+        let expected = 1.0 / (1.0 + (-m).exp());
+        prop_assert!((median - expected).abs() < 0.03, "median {median} vs {expected}");
+    }
+}

@@ -1,0 +1,219 @@
+//! `cargo xtask pretrain gmm`: the pretrained demo model.
+//!
+//! Trains the GMM blob model that `cargo xtask demo` samples from first
+//! (the demo's dataset: Gaussian-bump signals on the built-in blob, seed 0)
+//! with [`PRETRAIN_CONFIG`], evaluates it on the demo's test mesh, and
+//! installs the run into `fixtures/pretrained/gmm-blob/`: `config.toml`,
+//! `flow.json`, `model.safetensors` with `model.json` and the checksums in
+//! `model.state.json`, `train_log.csv`, and `README.md` with the command,
+//! the training time and the measured quality. The folder is replaced whole
+//! (written beside it, then renamed), so an interrupted pretraining leaves
+//! the shipped model as it was. Training resumes when the scratch run
+//! folder (`out/pretrain/gmm/run`) already holds checkpoints.
+
+use crate::flow_steps::{Mfm, Quality, arg, num, out_dir};
+use crate::pyenv::PyEnv;
+use anyhow::{Context, Result, bail};
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+/// Where the pretrained model lives, relative to the workspace root.
+pub const PRETRAINED_DIR: &str = "fixtures/pretrained/gmm-blob";
+
+/// The files of a run folder that make up the pretrained model.
+pub const MODEL_FILES: [&str; 6] = [
+    "config.toml",
+    "flow.json",
+    "model.safetensors",
+    "model.json",
+    "model.state.json",
+    "train_log.csv",
+];
+
+/// Training signals of the pretraining dataset: the demo's 1000 (the same
+/// generator, seed and count).
+pub const PRETRAIN_SIGNALS: usize = 1000;
+
+/// The pretrained model's run configuration: the `cpu` preset's recipe
+/// (see `RunConfig::preset("cpu")`: the official loss, sampling with the
+/// weight average) at width 32, 3 blocks, trained 10,000 steps on one
+/// thread. It is the `W32K3-official-ema` run of `cargo xtask
+/// time-to-quality` (docs/BENCHMARKS.md) stopped at step 10,000: a run is a
+/// pure function of its seed, data and thread count, and neither the total
+/// step count nor checkpointing changes its steps.
+pub const PRETRAIN_CONFIG: &str = "\
+# cargo xtask pretrain gmm: the pretrained demo model
+[model]
+preset = \"small\"
+width = 32
+blocks = 3
+vector_layers = 3
+
+[train]
+steps = 10000
+batch = 4
+lr = 2e-3
+lr_schedule = { milestones = [[2000, 5e-4]] }
+ema = 0.999
+threads = 1
+checkpoint_every = 500
+log_every = 100
+";
+
+/// Arguments of `cargo xtask pretrain gmm`.
+#[derive(clap::Args)]
+pub struct PretrainArgs {
+    /// Scratch folder of the dataset and the run.
+    #[arg(long, default_value = "out/pretrain/gmm")]
+    pub out: PathBuf,
+}
+
+/// Trains, evaluates and installs the pretrained GMM model.
+pub fn gmm(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
+    let out = out_dir(&args.out);
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    let exe = crate::demo::mfm_binary(env)?;
+    let mfm = Mfm { exe: &exe };
+    let data = out.join("data");
+    mfm.ensure_gmm_dataset(&data, PRETRAIN_SIGNALS)?;
+    let config = out.join("run.toml");
+    std::fs::write(&config, PRETRAIN_CONFIG)
+        .with_context(|| format!("cannot write {}", config.display()))?;
+    let run = out.join("run");
+    if run.join("model.safetensors").is_file() {
+        println!("{} is trained already", run.display());
+    } else if run.join("config.toml").is_file() {
+        mfm.run(&[
+            "train",
+            "--resume",
+            "--out",
+            &arg(&run),
+            "--dataset",
+            &arg(&data.join("train")),
+        ])?;
+    } else {
+        mfm.run(&[
+            "train",
+            "--config",
+            &arg(&config),
+            "--dataset",
+            &arg(&data.join("train")),
+            "--out",
+            &arg(&run),
+        ])?;
+    }
+    let log = std::fs::read_to_string(run.join("train_log.csv"))
+        .with_context(|| format!("cannot read {}", run.join("train_log.csv").display()))?;
+    let train_seconds = log
+        .lines()
+        .last()
+        .and_then(|l| l.rsplit(',').next())
+        .and_then(|s| s.parse::<f64>().ok())
+        .unwrap_or(f64::NAN);
+
+    // the demo's evaluation: 64 samples on the test mesh, seed 7
+    let samples = out.join("samples");
+    if samples.exists() {
+        std::fs::remove_dir_all(&samples)
+            .with_context(|| format!("cannot remove {}", samples.display()))?;
+    }
+    let test_mesh = data.join("reference/mesh.ply");
+    mfm.sample(&run, &test_mesh, 64, 7, &samples, &["--ply", "0"])?;
+    let reference = arg(&data.join("reference"));
+    let metrics = mfm.eval(
+        &samples.join("samples.npy"),
+        &["--reference", &reference],
+        &out.join("metrics.json"),
+        Some(&out.join("means.png")),
+    )?;
+    let q = Quality::of(&metrics);
+
+    let target = crate::root().join(PRETRAINED_DIR);
+    let parent = target
+        .parent()
+        .context("the pretrained folder has a parent")?;
+    std::fs::create_dir_all(parent)
+        .with_context(|| format!("cannot create {}", parent.display()))?;
+    let staging = parent.join(format!(".gmm-blob.tmp-{}", std::process::id()));
+    if staging.exists() {
+        std::fs::remove_dir_all(&staging)?;
+    }
+    std::fs::create_dir(&staging)
+        .with_context(|| format!("cannot create {}", staging.display()))?;
+    let fill = || -> Result<()> {
+        for name in MODEL_FILES {
+            std::fs::copy(run.join(name), staging.join(name))
+                .with_context(|| format!("cannot copy {} from {}", name, run.display()))?;
+        }
+        let mut md = String::new();
+        writeln!(md, "# Pretrained GMM model on the built-in blob\n")?;
+        writeln!(
+            md,
+            "Made by `cargo xtask pretrain gmm` ({PRETRAIN_SIGNALS} training signals of \
+             `mfm dataset gmm --seed 0` on `builtin:blob`, the run configuration in \
+             `config.toml`, the log in `train_log.csv`): {train_seconds:.0} s of training \
+             on the project's 2-core machine. `cargo xtask demo` samples from it first.\n"
+        )?;
+        writeln!(
+            md,
+            "Quality of 64 samples (seed 7) on the demo's 6635-vertex test mesh, by \
+             `mfm eval` against 100 reference signals:\n"
+        )?;
+        writeln!(
+            md,
+            "| residual median [q1, q3] | peak median | bumps > 1/2 | data-like | diversity | MMD | COV | 1-NNA | test error |\n|---|---|---|---|---|---|---|---|---|"
+        )?;
+        writeln!(
+            md,
+            "| {:.3} [{:.3}, {:.3}] | {:.2} | {:.2} | {:.0}% | {:.2} | {:.4} | {:.3} | {:.3} | {:.4} |",
+            q.residual[1],
+            q.residual[0],
+            q.residual[2],
+            q.peak[1],
+            q.bumps,
+            100.0 * q.within,
+            q.diversity,
+            num(&metrics, "mmd"),
+            num(&metrics, "cov"),
+            num(&metrics, "one_nna"),
+            num(&metrics, "test_error")
+        )?;
+        std::fs::write(staging.join("README.md"), md)?;
+        Ok(())
+    };
+    if let Err(e) = fill() {
+        let _ = std::fs::remove_dir_all(&staging);
+        return Err(e);
+    }
+    if target.exists() {
+        std::fs::remove_dir_all(&target)
+            .with_context(|| format!("cannot replace {}", target.display()))?;
+    }
+    std::fs::rename(&staging, &target)
+        .with_context(|| format!("cannot install {}", target.display()))?;
+    println!(
+        "pretrained model installed in {} (residual {:.3}, peak {:.2}, {:.2} bumps per sample)",
+        target.display(),
+        q.residual[1],
+        q.peak[1],
+        q.bumps
+    );
+    Ok(())
+}
+
+/// The shipped pretrained model folder, checked for its files.
+///
+/// # Errors
+/// When a file of [`MODEL_FILES`] is missing.
+pub fn shipped() -> Result<PathBuf> {
+    let dir = crate::root().join(PRETRAINED_DIR);
+    for name in MODEL_FILES {
+        if !dir.join(name).is_file() {
+            bail!(
+                "the pretrained model {} lacks {name}: run `cargo xtask pretrain gmm`",
+                dir.display()
+            );
+        }
+    }
+    Ok(dir)
+}
