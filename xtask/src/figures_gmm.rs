@@ -124,14 +124,8 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
         let [err, mmd, cov, nna] = ["test_error", "mmd", "cov", "one_nna"].map(|k| num(m, k));
         writeln!(
             md,
-            "| {kind} | {:.3} [{:.3}, {:.3}] | {:.2} | {:.2} | {:.0}% | {:.2} | {err:.4} | {mmd:.4} | {cov:.3} | {nna:.3} | {tr:.0} | {sa:.1} |",
-            q.residual[1],
-            q.residual[0],
-            q.residual[2],
-            q.peak[1],
-            q.bumps,
-            100.0 * q.within,
-            q.diversity
+            "| {kind} | {} | {err:.4} | {mmd:.4} | {cov:.3} | {nna:.3} | {tr:.0} | {sa:.1} |",
+            q.cells()
         )?;
         writeln!(
             csv,

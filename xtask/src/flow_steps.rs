@@ -140,6 +140,21 @@ impl Quality {
         )
     }
 
+    /// The quality columns of a Markdown table row: `residual median [q1,
+    /// q3] | peak median | bumps | data-like % | diversity` (no outer bars).
+    pub fn cells(&self) -> String {
+        format!(
+            "{:.3} [{:.3}, {:.3}] | {:.2} | {:.2} | {:.0}% | {:.2}",
+            self.residual[1],
+            self.residual[0],
+            self.residual[2],
+            self.peak[1],
+            self.bumps,
+            100.0 * self.within,
+            self.diversity
+        )
+    }
+
     /// The reference set's numbers.
     pub fn reference_of(metrics: &Value) -> Self {
         Self::set(&metrics["quality"]["reference"], f64::NAN, 1.0)

@@ -165,14 +165,8 @@ pub fn gmm(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
         )?;
         writeln!(
             md,
-            "| {:.3} [{:.3}, {:.3}] | {:.2} | {:.2} | {:.0}% | {:.2} | {:.4} | {:.3} | {:.3} | {:.4} |",
-            q.residual[1],
-            q.residual[0],
-            q.residual[2],
-            q.peak[1],
-            q.bumps,
-            100.0 * q.within,
-            q.diversity,
+            "| {} | {:.4} | {:.3} | {:.3} | {:.4} |",
+            q.cells(),
             num(&metrics, "mmd"),
             num(&metrics, "cov"),
             num(&metrics, "one_nna"),

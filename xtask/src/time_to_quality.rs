@@ -477,17 +477,11 @@ fn write_report(out: &Path, results: &[(Variant, Vec<Point>)]) -> Result<()> {
             )?;
             writeln!(
                 md,
-                "| {} | {} | {:.0} | {:.3} [{:.3}, {:.3}] | {:.2} | {:.2} | {:.0}% | {:.2} | {:.4} | {:.3} | {:.4} |",
+                "| {} | {} | {:.0} | {} | {:.4} | {:.3} | {:.4} |",
                 v.name,
                 p.step,
                 p.seconds,
-                q.residual[1],
-                q.residual[0],
-                q.residual[2],
-                q.peak[1],
-                q.bumps,
-                100.0 * q.within,
-                q.diversity,
+                q.cells(),
                 p.mmd,
                 p.cov,
                 p.test_error
