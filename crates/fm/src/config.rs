@@ -747,17 +747,18 @@ pub enum TimeSampling {
 }
 
 impl TimeSampling {
-    /// Draws one path time in `[0, 1]` from `rng`: one uniform draw for
-    /// `uniform` and `late`, one standard normal (`rand_distr`) for
-    /// `logit-normal`.
-    pub fn draw(&self, rng: &mut impl rand::Rng) -> f64 {
+    /// Draws one path time in `[0, 1]` from `rng`: one uniform `f32` for
+    /// `uniform` (the draw training has always made), one uniform `f64` for
+    /// `late`, one standard normal (`rand_distr`) for `logit-normal`; the
+    /// last two are computed in `f64`.
+    pub fn draw(&self, rng: &mut impl rand::Rng) -> f32 {
         match *self {
-            Self::Uniform => rng.random::<f64>(),
+            Self::Uniform => rng.random::<f32>(),
             Self::LogitNormal { mean, std } => {
                 let z: f64 = rng.sample(rand_distr::StandardNormal);
-                1.0 / (1.0 + (-(mean + std * z)).exp())
+                (1.0 / (1.0 + (-(mean + std * z)).exp())) as f32
             }
-            Self::Late { power } => 1.0 - (1.0 - rng.random::<f64>()).powf(power),
+            Self::Late { power } => (1.0 - (1.0 - rng.random::<f64>()).powf(power)) as f32,
         }
     }
 

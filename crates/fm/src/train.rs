@@ -87,9 +87,7 @@ use crate::checkpoint::{
     self, CONFIG_FILE, CheckpointState, EMA_FILE, FLOW_FILE, FlowSpec, LOG_FILE, LogAccumulator,
     OPTIMIZER_FILE, Prediction, WEIGHTS_FILE,
 };
-use crate::config::{
-    CLEAN_WEIGHT_MAX, DeviceChoice, FrameChoice, NoiseScale, RunConfig, TimeSampling,
-};
+use crate::config::{CLEAN_WEIGHT_MAX, DeviceChoice, FrameChoice, NoiseScale, RunConfig};
 use crate::context::MeshContext;
 use crate::error::{FmError, Result};
 use crate::sample::{conditioning, offset_tensor, positions_tensor};
@@ -800,11 +798,8 @@ impl Trainer {
         let b = self.config.train.batch;
         let idx = self.order.indices(step, b);
         let mut rng = derived_rng(self.config.train.seed, PURPOSE_TIME, step);
-        let t: Vec<f32> = match self.config.train.time {
-            // the uniform draw stays the f32 one runs have always made
-            TimeSampling::Uniform => (0..b).map(|_| rng.random::<f32>()).collect(),
-            other => (0..b).map(|_| other.draw(&mut rng) as f32).collect(),
-        };
+        let time = self.config.train.time;
+        let t: Vec<f32> = (0..b).map(|_| time.draw(&mut rng)).collect();
         (idx, t)
     }
 

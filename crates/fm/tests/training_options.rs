@@ -301,13 +301,15 @@ proptest! {
     ) {
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
         let n = 4000;
-        let late: Vec<f64> = (0..n).map(|_| TimeSampling::Late { power }.draw(&mut rng)).collect();
+        let late: Vec<f64> = (0..n)
+            .map(|_| f64::from(TimeSampling::Late { power }.draw(&mut rng)))
+            .collect();
         prop_assert!(late.iter().all(|t| (0.0..=1.0).contains(t)));
         let mean = late.iter().sum::<f64>() / n as f64;
         let expected = 1.0 - 1.0 / (power + 1.0);
         prop_assert!((mean - expected).abs() < 0.02, "late:{power} mean {mean} vs {expected}");
         let mut ln: Vec<f64> = (0..n)
-            .map(|_| TimeSampling::LogitNormal { mean: m, std: 1.0 }.draw(&mut rng))
+            .map(|_| f64::from(TimeSampling::LogitNormal { mean: m, std: 1.0 }.draw(&mut rng)))
             .collect();
         prop_assert!(ln.iter().all(|t| (0.0..=1.0).contains(t)));
         ln.sort_by(f64::total_cmp);
