@@ -36,6 +36,7 @@ mod flow_steps;
 mod no_network;
 mod pretrain;
 mod pyenv;
+mod python_package;
 mod time_to_quality;
 mod visual_check;
 
@@ -63,6 +64,18 @@ enum Cmd {
     },
     /// Formatting and clippy checks (warnings are errors).
     Lint,
+    /// Build the `mfm` Python package's wheel (release, abi3) into
+    /// target/wheels/.
+    Wheel,
+    /// Only the Python package's tests: build its wheel (dev profile),
+    /// install it into a folder of its own and run pytest on
+    /// crates/python/tests (extra args go to pytest; without them a fresh
+    /// venv also installs the wheel and samples noise with it).
+    Pytest {
+        /// Arguments passed through to pytest.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
     /// Build `mfm` without its network feature and check that it links no
     /// libtorch (ldd) and runs without it (run after `cargo xtask test`: only
     /// the cli crate compiles again).
@@ -245,9 +258,13 @@ fn main() -> Result<()> {
             // libtorch (a selection of tests, with arguments, does not)
             if args.is_empty() {
                 no_network::check()?;
+                // and the Python package, from Python
+                python_package::check(&env, &[])?;
             }
             Ok(())
         }
+        Cmd::Wheel => python_package::wheel(&pyenv::ensure()?),
+        Cmd::Pytest { args } => python_package::check(&pyenv::ensure()?, &args),
         Cmd::NoNetwork => no_network::check(),
         Cmd::Lint => {
             let env = pyenv::ensure()?;

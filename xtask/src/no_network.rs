@@ -7,9 +7,9 @@
 use anyhow::{Context, Result, bail};
 use std::process::Command;
 
-/// Builds and checks the libtorch-free `mfm`.
-pub fn check() -> Result<()> {
-    println!("== mfm without the network feature (no libtorch)");
+/// Builds the libtorch-free `mfm` (test profile, no `network` feature) and
+/// returns its path.
+pub fn build() -> Result<std::path::PathBuf> {
     let mut build = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned()));
     build.current_dir(crate::root()).args([
         "build",
@@ -25,7 +25,13 @@ pub fn check() -> Result<()> {
         .env_remove("LIBTORCH")
         .env_remove("LIBTORCH_USE_PYTORCH");
     crate::run(&mut build)?;
-    let exe = crate::target_dir().join("debug").join("mfm");
+    Ok(crate::target_dir().join("debug").join("mfm"))
+}
+
+/// Builds and checks the libtorch-free `mfm`.
+pub fn check() -> Result<()> {
+    println!("== mfm without the network feature (no libtorch)");
+    let exe = build()?;
     let ldd = Command::new("ldd")
         .arg(&exe)
         .output()

@@ -1,5 +1,6 @@
 //! The project's Python environment: pinned torch (whose libtorch `tch` links
-//! against) and the oracles used by tests (libigl, scipy, numpy, pyvista).
+//! against), the oracles used by tests (libigl, scipy, numpy, pyvista), and
+//! maturin and pytest, which build and test the `mfm` Python package.
 //!
 //! It lives in a per-user cache folder keyed by the pinned versions, so every
 //! clone and every CI run on one machine shares one 4.7 GB install:
@@ -20,6 +21,9 @@ const PINNED: &[(&str, &str)] = &[
     ("scipy==1.17.1", "scipy1.17.1"),
     ("numpy==2.4.6", "np2.4.6"),
     ("pyvista==0.49.1", "pv0.49.1"),
+    // the Python package: its build backend and its test runner
+    ("maturin==1.16.0", "maturin1.16.0"),
+    ("pytest==9.2.0", "pytest9.2.0"),
 ];
 
 const MARKER: &str = ".mfm-env-complete";
@@ -150,7 +154,7 @@ pub fn ensure() -> Result<PyEnv> {
 fn install(dir: &Path) -> Result<()> {
     let start = std::time::Instant::now();
     eprintln!(
-        "xtask: creating the Python environment {} (pinned torch, libigl, scipy, numpy, pyvista; ~4.7 GB, about a minute)",
+        "xtask: creating the Python environment {} (pinned torch, libigl, scipy, numpy, pyvista, maturin, pytest; ~4.7 GB, about a minute)",
         dir.display()
     );
     let python = dir.join("bin/python");
