@@ -338,7 +338,7 @@ fn peers_dir() -> Result<PathBuf> {
 }
 
 /// Finds or creates the peers' environment; returns its interpreter.
-fn ensure_peers() -> Result<PathBuf> {
+pub(crate) fn ensure_peers() -> Result<PathBuf> {
     let dir = peers_dir()?;
     let python = dir.join("bin/python");
     let marker = dir.join(MARKER);

@@ -172,6 +172,28 @@ enum BenchCmd {
         #[arg(long, default_value_t = 3)]
         runs: usize,
     },
+    /// Factor + a batch of Matérn samples end to end from Python: the `mfm`
+    /// wheel against the `mfm` command line, CHOLMOD (scikit-sparse) and
+    /// cholespy, in one process, round by round (the peers' cached
+    /// environment of `bench noise`).
+    Python {
+        /// Mesh file to subdivide and time.
+        #[arg(long, default_value = "../shared/meshes/bunny.off")]
+        mesh: PathBuf,
+        /// Midpoint subdivisions (each multiplies the faces by 4; 4 turns
+        /// the bunny into 892k vertices, 1.78M faces).
+        #[arg(long, default_value_t = 4)]
+        subdiv: u32,
+        /// Samples per batch.
+        #[arg(long, default_value_t = 64)]
+        batch: usize,
+        /// Screening weight tau of L + tau M.
+        #[arg(long, default_value_t = 100.0)]
+        tau: f64,
+        /// Timed rounds after a warm-up round (the fastest is tabulated).
+        #[arg(long, default_value_t = 3)]
+        runs: usize,
+    },
     /// PoissonNet training step (forward, backward, Adam) and batch-1
     /// inference at the presets (`mfm net bench`), in rounds; with
     /// `--baseline`, interleaved with another `mfm` binary. Compared with the
@@ -318,6 +340,30 @@ fn main() -> Result<()> {
                 tau,
                 runs,
             })
+        }
+        Cmd::Bench(BenchCmd::Python {
+            mesh,
+            subdiv,
+            batch,
+            tau,
+            runs,
+        }) => {
+            let env = pyenv::ensure()?;
+            let mesh = if mesh.is_relative() {
+                root().join(mesh)
+            } else {
+                mesh
+            };
+            python_package::bench(
+                &env,
+                &python_package::PythonBench {
+                    mesh: &mesh,
+                    subdiv,
+                    batch,
+                    tau,
+                    runs,
+                },
+            )
         }
         Cmd::Bench(BenchCmd::Net {
             mesh,

@@ -14,6 +14,9 @@
 //!    empty folder with an empty environment (no cargo, no libtorch, no
 //!    checkout on the path) writes a mesh file, reads it back and samples
 //!    Matérn noise on it.
+//!
+//! `cargo xtask bench python` times the wheel against the command line and
+//! the Python sparse Cholesky stack (`xtask/python/bench_python.py`).
 
 use crate::pyenv::PyEnv;
 use anyhow::{Context, Result, bail};
@@ -190,5 +193,136 @@ print(f"mfm {mfm.__version__} from {os.path.dirname(mfm.__file__)}: {x.shape[0]}
         );
     }
     print!("ok (fresh venv): {}", String::from_utf8_lossy(&out.stdout));
+    Ok(())
+}
+
+/// Options of `cargo xtask bench python`.
+pub struct PythonBench<'a> {
+    /// Mesh file (subdivided `subdiv` times).
+    pub mesh: &'a Path,
+    /// Midpoint subdivisions.
+    pub subdiv: u32,
+    /// Samples per batch.
+    pub batch: usize,
+    /// Screening weight.
+    pub tau: f64,
+    /// Timed rounds after the warm-up.
+    pub runs: usize,
+}
+
+/// `cargo xtask bench python`: the release wheel, the release `mfm` and the
+/// peers timed in one process; prints the table and keeps the JSON in
+/// `<target>/bench-python/report.json`.
+pub fn bench(env: &PyEnv, opts: &PythonBench) -> Result<()> {
+    if !opts.mesh.is_file() {
+        bail!(
+            "{}: mesh file not found (pass --mesh PATH; the default needs ../shared/meshes)",
+            opts.mesh.display()
+        );
+    }
+    if !(opts.tau.is_finite() && opts.tau > 0.0) || opts.batch == 0 || opts.runs == 0 {
+        bail!("--tau must be positive, --batch and --runs at least 1");
+    }
+    let peers = crate::bench_noise::ensure_peers()?;
+    let dir = crate::target_dir().join("bench-python");
+    let wheel = build_wheel(env, "release", &dir.join("wheel"))?;
+    let site = dir.join("site");
+    if site.exists() {
+        fs::remove_dir_all(&site).with_context(|| format!("cannot remove {}", site.display()))?;
+    }
+    crate::run(
+        Command::new(&peers)
+            .args([
+                "-m",
+                "pip",
+                "install",
+                "--quiet",
+                "--disable-pip-version-check",
+            ])
+            .args(["--no-deps", "--target"])
+            .arg(&site)
+            .arg(&wheel),
+    )?;
+    let cli = crate::demo::mfm_binary(env)?;
+    let scripts = crate::root().join("xtask/python");
+    let path = std::env::join_paths([site.as_path(), scripts.as_path()])?;
+    let out = Command::new(&peers)
+        .arg(scripts.join("bench_python.py"))
+        .args([
+            "--subdiv",
+            &opts.subdiv.to_string(),
+            "--runs",
+            &opts.runs.to_string(),
+        ])
+        .args([
+            "--batch",
+            &opts.batch.to_string(),
+            "--tau",
+            &opts.tau.to_string(),
+        ])
+        .arg("--work")
+        .arg(dir.join("work"))
+        .arg("--cli")
+        .arg(&cli)
+        .arg(opts.mesh)
+        .env("PYTHONPATH", path)
+        .stderr(std::process::Stdio::inherit())
+        .output()
+        .context("cannot run bench_python.py")?;
+    if !out.status.success() {
+        bail!("bench_python.py failed ({})", out.status);
+    }
+    let report: serde_json::Value =
+        serde_json::from_slice(&out.stdout).context("bench_python.py did not print JSON")?;
+    let json = dir.join("report.json");
+    fs::write(&json, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("cannot write {}", json.display()))?;
+    print_bench(&report, &json)
+}
+
+fn print_bench(r: &serde_json::Value, json: &Path) -> Result<()> {
+    let t = &r["timings"];
+    let ms = |k: &str, s: &str| t[k][s].as_f64().unwrap_or(f64::NAN);
+    println!(
+        "{}; {} vertices, {} faces, batch {}, tau {}; fastest of {} rounds (medians in {})",
+        r["tool"].as_str().unwrap_or("?"),
+        r["vertices"],
+        r["faces"],
+        r["batch"],
+        r["tau"],
+        r["runs"],
+        json.display()
+    );
+    println!(
+        "| pipeline (factor + {} samples) | fastest s | median s | vs mfm (Python, f64) |",
+        r["batch"]
+    );
+    println!("|---|---|---|---|");
+    let ours = ms("mfm_py_f64", "min_ms");
+    let rows = [
+        ("mfm, Python, float64 (arrays in memory)", "mfm_py_f64"),
+        ("mfm, Python, float32", "mfm_py_f32"),
+        ("mfm, Python, read_mesh + float64", "mfm_py_file"),
+        ("`mfm noise` (read, sample, write the .npy)", "cli"),
+        ("libigl + CHOLMOD (scikit-sparse)", "cholmod"),
+        ("libigl + cholespy", "cholespy"),
+    ];
+    for (label, key) in rows {
+        println!(
+            "| {label} | {:.2} | {:.2} | {:.2}x |",
+            ms(key, "min_ms") / 1e3,
+            ms(key, "median_ms") / 1e3,
+            ms(key, "min_ms") / ours
+        );
+    }
+    let best_peer = ms("cholmod", "min_ms").min(ms("cholespy", "min_ms"));
+    println!(
+        "Python (read_mesh + f64) / CLI = {:.2} (goal <= 1.2); Python f64 / best peer = {:.2} (goal <= 0.5); float64 samples equal the CLI's file: {}; f64 result {} MB, peak RSS after the mfm rounds {} MB",
+        ms("mfm_py_file", "min_ms") / ms("cli", "min_ms"),
+        ours / best_peer,
+        r["max_abs_difference_python_vs_cli"].as_f64() == Some(0.0),
+        r["f64_result_mb"],
+        r["peak_rss_mb_after_mfm_rounds"]
+    );
     Ok(())
 }
