@@ -92,12 +92,18 @@ pub fn wheel(env: &PyEnv) -> Result<()> {
 fn install_for_tests(env: &PyEnv) -> Result<(PathBuf, PathBuf)> {
     let base = crate::target_dir().join("python");
     let wheel = build_wheel(env, "dev", &base.join("wheel"))?;
-    let site = base.join("site");
+    let site = install_into(&env.python, &wheel, &base.join("site"))?;
+    Ok((wheel, site))
+}
+
+/// `pip install --no-deps --target SITE WHEEL` with `python` (the folder
+/// emptied first); returns `site`, to put on `PYTHONPATH`.
+fn install_into(python: &Path, wheel: &Path, site: &Path) -> Result<PathBuf> {
     if site.exists() {
-        fs::remove_dir_all(&site).with_context(|| format!("cannot remove {}", site.display()))?;
+        fs::remove_dir_all(site).with_context(|| format!("cannot remove {}", site.display()))?;
     }
     crate::run(
-        Command::new(&env.python)
+        Command::new(python)
             .args([
                 "-m",
                 "pip",
@@ -106,10 +112,10 @@ fn install_for_tests(env: &PyEnv) -> Result<(PathBuf, PathBuf)> {
                 "--disable-pip-version-check",
             ])
             .args(["--no-deps", "--target"])
-            .arg(&site)
-            .arg(&wheel),
+            .arg(site)
+            .arg(wheel),
     )?;
-    Ok((wheel, site))
+    Ok(site.to_path_buf())
 }
 
 /// Runs the pytest suite against a freshly built wheel (`args` go to
@@ -226,23 +232,7 @@ pub fn bench(env: &PyEnv, opts: &PythonBench) -> Result<()> {
     let peers = crate::bench_noise::ensure_peers()?;
     let dir = crate::target_dir().join("bench-python");
     let wheel = build_wheel(env, "release", &dir.join("wheel"))?;
-    let site = dir.join("site");
-    if site.exists() {
-        fs::remove_dir_all(&site).with_context(|| format!("cannot remove {}", site.display()))?;
-    }
-    crate::run(
-        Command::new(&peers)
-            .args([
-                "-m",
-                "pip",
-                "install",
-                "--quiet",
-                "--disable-pip-version-check",
-            ])
-            .args(["--no-deps", "--target"])
-            .arg(&site)
-            .arg(&wheel),
-    )?;
+    let site = install_into(&peers, &wheel, &dir.join("site"))?;
     let cli = crate::demo::mfm_binary(env)?;
     let scripts = crate::root().join("xtask/python");
     let path = std::env::join_paths([site.as_path(), scripts.as_path()])?;

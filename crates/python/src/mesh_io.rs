@@ -22,6 +22,7 @@ pub type MeshArrays<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<i64>>
 /// `FileNotFoundError` / `OSError` when the file cannot be read and
 /// `ValueError` for a file that is not a valid mesh, with the command
 /// line's message; the mesh's other problems are `UserWarning`s.
+///
 /// Example:
 ///
 /// >>> import mfm
@@ -79,6 +80,7 @@ pub fn mesh_arrays(
 /// `scalars`, a dict `{name: float64 array [n]}`, adds per-vertex
 /// properties to a `.ply` file (MeshLab and plyfile show them); other
 /// formats cannot carry them and raise `ValueError`.
+///
 /// Example:
 ///
 /// >>> import mfm, os, tempfile

@@ -169,6 +169,7 @@ pub fn count(argument: &str, value: i64, min: i64) -> PyResult<usize> {
 /// `first .. first + n`; `float32` draws its own `float32` normals on the
 /// same per-sample streams (the same law, other bits). A seed gives the
 /// same bits on any number of threads.
+///
 /// Example:
 ///
 /// >>> import mfm, numpy as np

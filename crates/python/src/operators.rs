@@ -23,9 +23,28 @@ pub fn require_nondegenerate(py: Python<'_>, mesh: &TriMesh) -> PyResult<()> {
         .map_err(|e| bad_argument("F", format!("{e}; the operators are undefined there")))
 }
 
+/// The operator `op` of the mesh `(V, F)` as a scipy matrix, computed
+/// with the GIL released; `undefined_on_degenerate` refuses meshes with a
+/// degenerate face first.
+fn sparse_operator<'py>(
+    py: Python<'py>,
+    v: &Bound<'py, PyAny>,
+    f: &Bound<'py, PyAny>,
+    undefined_on_degenerate: bool,
+    op: impl Fn(&TriMesh) -> Result<SparseColMat<usize, f64>, String> + Send + Sync,
+) -> PyResult<Bound<'py, PyAny>> {
+    let mesh = arrays::mesh(py, v, f)?;
+    if undefined_on_degenerate {
+        require_nondegenerate(py, &mesh)?;
+    }
+    let m = py.detach(|| op(&mesh)).map_err(runtime_error)?;
+    to_scipy(py, &m)
+}
+
 /// The cotangent Laplacian `L` of `(V, F)`: a `scipy.sparse.csc_matrix`
 /// `[n, n]`, **positive semi-definite** (`L = -igl.cotmatrix(V, F)`; rows sum
 /// to zero), symmetric with both triangles stored.
+///
 /// Example:
 ///
 /// >>> import mfm, numpy as np
@@ -41,15 +60,13 @@ pub fn cotan_laplacian<'py>(
     V: &Bound<'py, PyAny>,
     F: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let mesh = arrays::mesh(py, V, F)?;
-    require_nondegenerate(py, &mesh)?;
-    let l = py.detach(|| operators::cotangent_laplacian(&mesh));
-    to_scipy(py, &l)
+    sparse_operator(py, V, F, true, |m| Ok(operators::cotangent_laplacian(m)))
 }
 
 /// The lumped (barycentric) mass matrix `M` of `(V, F)`: a diagonal
 /// `scipy.sparse.csc_matrix` `[n, n]`, a third of the area of the faces
 /// around each vertex (`igl.massmatrix(V, F, igl.MASSMATRIX_TYPE_BARYCENTRIC)`).
+///
 /// Example:
 ///
 /// >>> import mfm
@@ -65,17 +82,17 @@ pub fn mass_matrix<'py>(
     V: &Bound<'py, PyAny>,
     F: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let mesh = arrays::mesh(py, V, F)?;
-    let mass = py.detach(|| operators::lumped_mass(&mesh));
-    let n = mass.len();
-    let diagonal: Vec<Triplet<usize, usize, f64>> = mass
-        .iter()
-        .enumerate()
-        .map(|(i, &m)| Triplet::new(i, i, m))
-        .collect();
-    let m = SparseColMat::try_new_from_triplets(n, n, &diagonal)
-        .map_err(|e| runtime_error(format!("mass matrix: {e:?}")))?;
-    to_scipy(py, &m)
+    sparse_operator(py, V, F, false, |mesh| {
+        let mass = operators::lumped_mass(mesh);
+        let n = mass.len();
+        let diagonal: Vec<Triplet<usize, usize, f64>> = mass
+            .iter()
+            .enumerate()
+            .map(|(i, &m)| Triplet::new(i, i, m))
+            .collect();
+        SparseColMat::try_new_from_triplets(n, n, &diagonal)
+            .map_err(|e| format!("mass matrix: {e:?}"))
+    })
 }
 
 /// The intrinsic gradient `G` of `(V, F)`: a `scipy.sparse.csc_matrix`
@@ -84,6 +101,7 @@ pub fn mass_matrix<'py>(
 /// frame of the face whose first axis runs along its first edge
 /// (`F[f, 0] -> F[f, 1]`). `G.T @ diag(A2) @ G == L` with `A2` the face
 /// areas each repeated twice (`face_areas`).
+///
 /// Example:
 ///
 /// >>> import mfm, numpy as np, scipy.sparse as sp
@@ -100,13 +118,11 @@ pub fn face_gradients<'py>(
     V: &Bound<'py, PyAny>,
     F: &Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let mesh = arrays::mesh(py, V, F)?;
-    require_nondegenerate(py, &mesh)?;
-    let g = py.detach(|| operators::intrinsic_gradient(&mesh));
-    to_scipy(py, &g)
+    sparse_operator(py, V, F, true, |m| Ok(operators::intrinsic_gradient(m)))
 }
 
 /// The face areas of `(V, F)`, `float64 [m]` (`igl.doublearea(V, F) / 2`).
+///
 /// Example:
 ///
 /// >>> import mfm
@@ -131,6 +147,7 @@ pub fn face_areas<'py>(
 /// computes them: `(eigenvalues float64 [k], ascending; eigenvectors
 /// float64 [n, k], M-orthonormal columns: phi.T @ M @ phi == I)`. The sign
 /// of each eigenvector is arbitrary.
+///
 /// Example:
 ///
 /// >>> import mfm, numpy as np

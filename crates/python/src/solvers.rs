@@ -74,15 +74,46 @@ fn write_back<'py, T: numpy::Element + Copy>(
     Ok(PyArray2::from_owned_array(py, m).into_any())
 }
 
-/// Solves `rhs` (`[n]` or `[n, K]`, float32 or float64) with the `f64` or
-/// `f32` solve of a factor of size `n`.
+/// A factor that solves blocks of right-hand sides in place, in `f64` and
+/// `f32`.
+trait CachedFactor: Sync {
+    fn dim(&self) -> usize;
+    fn solve_f64(&self, b: MatMut<'_, f64>) -> Result<(), SolverError>;
+    fn solve_f32(&self, b: MatMut<'_, f32>) -> Result<(), SolverError>;
+}
+
+impl CachedFactor for LaplacianSolver {
+    fn dim(&self) -> usize {
+        LaplacianSolver::dim(self)
+    }
+    fn solve_f64(&self, b: MatMut<'_, f64>) -> Result<(), SolverError> {
+        self.solve_many_in_place(b)
+    }
+    fn solve_f32(&self, b: MatMut<'_, f32>) -> Result<(), SolverError> {
+        self.solve_many_f32_in_place(b)
+    }
+}
+
+impl CachedFactor for ScreenedPoisson {
+    fn dim(&self) -> usize {
+        ScreenedPoisson::dim(self)
+    }
+    fn solve_f64(&self, b: MatMut<'_, f64>) -> Result<(), SolverError> {
+        self.solve_many_in_place(b)
+    }
+    fn solve_f32(&self, b: MatMut<'_, f32>) -> Result<(), SolverError> {
+        self.solve_many_f32_in_place(b)
+    }
+}
+
+/// Solves `rhs` (`[n]` or `[n, K]`, float32 or float64) with `factor`, in
+/// the precision of `rhs`.
 fn solve<'py>(
     py: Python<'py>,
     rhs: &Bound<'py, PyAny>,
-    n: usize,
-    f64_solve: impl Fn(MatMut<'_, f64>) -> Result<(), SolverError> + Send + Sync,
-    f32_solve: impl Fn(MatMut<'_, f32>) -> Result<(), SolverError> + Send + Sync,
+    factor: &impl CachedFactor,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let n = factor.dim();
     let arr = ndarray(rhs, "rhs")?;
     let shape_ok = match arr.ndim() {
         1 => arr.shape()[0] == n,
@@ -109,12 +140,12 @@ fn solve<'py>(
     let failed = |e: SolverError| runtime_error(format!("solve failed: {e}"));
     if f64 {
         let mut b = read_rhs::<f64>(arr, n)?;
-        py.detach(|| f64_solve(b.columns.as_mut()))
+        py.detach(|| factor.solve_f64(b.columns.as_mut()))
             .map_err(failed)?;
         write_back(py, b)
     } else {
         let mut b = read_rhs::<f32>(arr, n)?;
-        py.detach(|| f32_solve(b.columns.as_mut()))
+        py.detach(|| factor.solve_f32(b.columns.as_mut()))
             .map_err(failed)?;
         write_back(py, b)
     }
@@ -140,6 +171,7 @@ fn factor_error(e: SolverError) -> PyErr {
 /// `solve(rhs)` solves `(L + eps I) x = rhs` for `rhs` `[n]` or `[n, K]`,
 /// `float32` or `float64`, and returns `x` in the same shape and dtype.
 /// `mfm.torch.poisson_solve(solver, rhs)` is its differentiable form.
+///
 /// Example:
 ///
 /// >>> import mfm, numpy as np
@@ -201,14 +233,7 @@ impl PoissonSolver {
     /// Solves `(L + eps I) x = rhs`; `rhs` `[n]` or `[n, K]`, float32 or
     /// float64; `x` has the shape and dtype of `rhs`. Releases the GIL.
     fn solve<'py>(&self, py: Python<'py>, rhs: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
-        let s = &self.solver;
-        solve(
-            py,
-            rhs,
-            s.dim(),
-            |b| s.solve_many_in_place(b),
-            |b| s.solve_many_f32_in_place(b),
-        )
+        solve(py, rhs, &self.solver)
     }
 
     /// The shift `eps` that was used.
@@ -240,6 +265,7 @@ impl PoissonSolver {
 ///
 /// `solve(rhs)` solves `(L + tau M) x = rhs` for `rhs` `[n]` or `[n, K]`,
 /// `float32` or `float64`, and returns `x` in the same shape and dtype.
+///
 /// Example:
 ///
 /// >>> import mfm, numpy as np
@@ -283,14 +309,7 @@ impl ScreenedSolver {
     /// Solves `(L + tau M) x = rhs`; `rhs` `[n]` or `[n, K]`, float32 or
     /// float64; `x` has the shape and dtype of `rhs`. Releases the GIL.
     fn solve<'py>(&self, py: Python<'py>, rhs: &Bound<'py, PyAny>) -> PyResult<Bound<'py, PyAny>> {
-        let s = &self.solver;
-        solve(
-            py,
-            rhs,
-            s.dim(),
-            |b| s.solve_many_in_place(b),
-            |b| s.solve_many_f32_in_place(b),
-        )
+        solve(py, rhs, &self.solver)
     }
 
     /// The screening weight `tau`.

@@ -79,6 +79,7 @@ pub fn measure<'py>(
 /// `mean_energy` (mean `f^T M f`), `captured_energy`, `theory_energy`,
 /// `gamma`, `vertices`, `num_signals`. The noise arguments are those of
 /// `MaternNoise`; `frame="as-is"` reproduces `mfm spectrum`'s numbers.
+///
 /// Example:
 ///
 /// >>> import mfm
