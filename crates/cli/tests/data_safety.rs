@@ -187,6 +187,41 @@ fn outputs_never_replace_inputs_devices_or_each_other() {
 fn bad_files_and_values_are_refused_by_name() {
     let d = tempfile::tempdir().unwrap();
     let d = d.path();
+    // huge values are written with the shared formatter, not 300 digits
+    let e = refused(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "g",
+            "--n",
+            "2",
+            "--sigma",
+            "1e300",
+        ],
+        "e300",
+    );
+    assert!(e.len() < 400, "{e}");
+    // the advice names the flag of the command: --regions, not handles
+    let e = refused(
+        d,
+        &[
+            "dataset",
+            "pairs",
+            "--mesh",
+            "builtin:capsule",
+            "--out",
+            "p",
+            "--regions",
+            "400",
+        ],
+        "use fewer regions (--regions)",
+    );
+    assert!(!e.contains("fewer handles"), "{e}");
+    assert!(!d.join("g").exists() && !d.join("p").exists());
     // header counts are enforced
     fs::write(
         d.join("extra.off"),
