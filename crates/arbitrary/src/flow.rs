@@ -13,7 +13,7 @@
 //! and maps back to the source's units.
 //!
 //! Run folder: [`ARBITRARY_SPEC`], a copy of the predictor
-//! ([`PREDICTOR_WEIGHTS`], its `.json`, [`PREDICTOR_COPY_SPEC`]), the log,
+//! ([`PREDICTOR_WEIGHTS`], its `.json`, [`PREDICTOR_COPY_SPEC`], their checksums in [`PREDICTOR_RECORD`]), the log,
 //! checkpoints and, when finished, `model.safetensors` + `model.json`.
 
 use std::collections::HashMap;
@@ -46,6 +46,10 @@ pub const ARBITRARY_SPEC: &str = "arbitrary.json";
 pub const PREDICTOR_WEIGHTS: &str = "predictor.safetensors";
 /// The copied predictor's description.
 pub const PREDICTOR_COPY_SPEC: &str = "predictor.spec.json";
+/// The checksums of the copied predictor's files (checked on every load).
+pub const PREDICTOR_RECORD: &str = "predictor.state.json";
+/// The copied predictor's network configuration.
+const PREDICTOR_NET_CONFIG: &str = "predictor.json";
 
 const PURPOSE_ITEMS: u64 = 21;
 
@@ -215,7 +219,7 @@ pub fn train(
         }
         for (from, to) in [
             (WEIGHTS_FILE, PREDICTOR_WEIGHTS),
-            (NET_CONFIG_FILE, "predictor.json"),
+            (NET_CONFIG_FILE, PREDICTOR_NET_CONFIG),
         ] {
             let (a, b) = (predictor_dir.join(from), run_dir.join(to));
             let bytes = std::fs::read(&a).map_err(|e| FmError::io(&a, e))?;
@@ -230,6 +234,11 @@ pub fn train(
                 predictor: predictor_dir.to_path_buf(),
                 vertices: template.num_vertices(),
             },
+        )?;
+        mfm_fm::checkpoint::write_file_record(
+            run_dir,
+            PREDICTOR_RECORD,
+            &[PREDICTOR_WEIGHTS, PREDICTOR_NET_CONFIG, PREDICTOR_COPY_SPEC],
         )?;
     }
     let predictor = load_copied_predictor(run_dir)?;
@@ -303,6 +312,7 @@ pub fn train(
 }
 
 fn load_copied_predictor(run_dir: &Path) -> Result<EigenPredictor> {
+    mfm_fm::checkpoint::verify_file_record(run_dir, PREDICTOR_RECORD)?;
     let spec: PredictorSpec = read_json(
         &run_dir.join(PREDICTOR_COPY_SPEC),
         "the copied predictor's description",

@@ -167,5 +167,6 @@ pub(crate) fn finished_weights(run_dir: &Path, what: &str) -> Result<PathBuf> {
             run_dir.display()
         )));
     }
+    mfm_fm::checkpoint::verify_file_record(run_dir, mfm_fm::checkpoint::FINAL_RECORD_FILE)?;
     Ok(weights)
 }

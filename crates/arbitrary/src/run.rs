@@ -119,6 +119,7 @@ impl Optimization {
                 (state.step, state.elapsed_seconds, state.last_loss)
             }
             None => {
+                checkpoint::refuse_restart_over_final_model(run_dir)?;
                 checkpoint::write_atomic(&log, format!("{LOG_HEADER}\n").as_bytes())?;
                 (0, 0.0, None)
             }

@@ -27,8 +27,9 @@ pub enum TrainMode {
     Arbitrary,
 }
 
-/// Runs `mfm train --mode predictor|arbitrary`.
-pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<()> {
+/// Runs `mfm train --mode predictor|arbitrary`; returns whether `stop`
+/// ended it (the caller exits with 130).
+pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<bool> {
     let kind = match a.mode {
         TrainMode::Predictor => RunKind::Predictor,
         TrainMode::Arbitrary => RunKind::Flow,
@@ -86,10 +87,7 @@ pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<()> {
             a.out.display()
         ),
     }
-    if report.stopped {
-        std::process::exit(130);
-    }
-    Ok(())
+    Ok(report.stopped)
 }
 
 /// Whether `run` is an arbitrary-source run.
@@ -167,10 +165,24 @@ pub struct EvalArgs {
     /// targets and a true other pose).
     #[arg(long)]
     out: PathBuf,
+    /// Write into a non-empty --out folder: replaces only what
+    /// `mfm eval-arbitrary` writes (report.json, holdout.png, reference.png).
+    #[arg(long)]
+    force: bool,
 }
+
+/// The files `mfm eval-arbitrary` writes into its --out folder.
+const EVAL_FILES: [&str; 3] = ["report.json", "holdout.png", "reference.png"];
 
 /// Runs `mfm eval-arbitrary`.
 pub fn eval(a: EvalArgs) -> Result<()> {
+    for (value, flag) in [(a.sources, "--sources"), (a.per_source, "--per-source")] {
+        if value == 0 {
+            bail!("{flag} must be at least 1 (metrics need at least one generated target)");
+        }
+    }
+    let _lock = crate::output::lock_folder(&a.out)?;
+    mfm_fm::sample_folder::check_output_folder(&a.out, a.force, "mfm eval-arbitrary", &EVAL_FILES)?;
     let sampler = ArbitrarySampler::load(&a.run)?;
     let folder = EvalFolder {
         run: &a.run,

@@ -234,6 +234,7 @@ fn dataset_pairs(a: PairsArgs) -> Result<()> {
              pass --mesh FILE or --mesh builtin:NAME"
         ),
     };
+    let _lock = crate::output::lock_folder(&a.out)?;
     ensure_empty(&a.out)?;
     let t0 = std::time::Instant::now();
     let (meshes, poses) = a.pose.meshes_and_space(&spec)?;
@@ -275,6 +276,7 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
     if a.n == 0 {
         bail!("--n must be at least 1");
     }
+    let _lock = crate::output::lock_folder(&a.out)?;
     ensure_empty(&a.out)?;
     let t0 = std::time::Instant::now();
     let (meshes, space) = a.pose.meshes_and_space(&a.mesh)?;
@@ -317,6 +319,7 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
     if a.n == 0 {
         bail!("--n must be at least 1");
     }
+    let _lock = crate::output::lock_folder(&a.out)?;
     ensure_empty(&a.out)?;
     let (train_mesh, test_mesh, source) = match (&a.mesh, &a.test_mesh) {
         (None, None) => {

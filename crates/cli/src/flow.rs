@@ -145,11 +145,16 @@ pub fn train(a: TrainArgs) -> Result<()> {
             );
         }
     }
+    let lock = crate::output::lock_folder(&a.out)?;
     if a.mode != crate::arbitrary::TrainMode::Flow {
         if a.config.is_some() || a.noise.is_some() || a.device.is_some() {
             bail!("--config, --noise and --device are options of --mode flow");
         }
-        return crate::arbitrary::train(&a, &stop);
+        if crate::arbitrary::train(&a, &stop)? {
+            drop(lock);
+            std::process::exit(130);
+        }
+        return Ok(());
     }
     if a.predictor.is_some() || a.no_eigenvectors {
         bail!("--predictor and --no-eigenvectors are options of --mode arbitrary");
@@ -227,6 +232,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
         );
     }
     if summary.stopped {
+        drop(lock);
         std::process::exit(130);
     }
     Ok(())
@@ -237,7 +243,8 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     if a.n == 0 {
         bail!("--n must be at least 1");
     }
-    check_output_folder(&a.out, a.force, &SAMPLE_FILES)?;
+    let _lock = crate::output::lock_folder(&a.out)?;
+    check_output_folder(&a.out, a.force, "mfm sample", &SAMPLE_FILES)?;
     if crate::arbitrary::is_arbitrary_run(&a.run) {
         if a.step.is_some() {
             bail!(
@@ -248,6 +255,18 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         return crate::arbitrary::sample(&a);
     }
     let Some(mesh_arg) = a.mesh.as_deref() else {
+        if a.run
+            .join(mfm_arbitrary::predictor::PREDICTOR_SPEC)
+            .is_file()
+        {
+            bail!(
+                "--run {}: is an eigenvector predictor run (mfm train --mode predictor), which \
+                 generates nothing itself: train an arbitrary-source flow with it \
+                 (mfm train --mode arbitrary --predictor {}) and sample that run with --source",
+                a.run.display(),
+                a.run.display()
+            );
+        }
         bail!(
             "--source is for arbitrary-source runs (mfm train --mode arbitrary); {} is a flow on one mesh: pass --mesh",
             a.run.display()

@@ -1,5 +1,6 @@
 //! The output guard every command runs before it writes
-//! ([`mfm_files::Outputs::prepare`]).
+//! ([`mfm_files::Outputs::prepare`]), and the lock of the folder a command
+//! writes ([`mfm_files::FolderLock`]).
 
 use anyhow::Result;
 use std::path::{Path, PathBuf};
@@ -12,4 +13,15 @@ pub use mfm_files::ensure_empty_dir as ensure_empty;
 pub fn prepare_outputs(inputs: &[Option<&Path>], outputs: &[PathBuf]) -> Result<mfm_files::Undo> {
     let guard = mfm_files::Outputs::new().inputs(inputs.iter().flatten());
     Ok(guard.outputs(outputs).prepare()?)
+}
+
+/// Locks the folder `dir` a command writes (a run, dataset, sample or
+/// report folder) for this process, naming its command line: a second
+/// writer is refused naming this one. Held until dropped.
+///
+/// # Errors
+/// [`mfm_files::FileError::Locked`] naming the holder.
+pub fn lock_folder(dir: &Path) -> Result<mfm_files::FolderLock> {
+    let command: Vec<String> = std::env::args().collect();
+    Ok(mfm_files::FolderLock::acquire(dir, &command.join(" "))?)
 }

@@ -187,6 +187,41 @@ fn outputs_never_replace_inputs_devices_or_each_other() {
 fn bad_files_and_values_are_refused_by_name() {
     let d = tempfile::tempdir().unwrap();
     let d = d.path();
+    // huge values are written with the shared formatter, not 300 digits
+    let e = refused(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "g",
+            "--n",
+            "2",
+            "--sigma",
+            "1e300",
+        ],
+        "e300",
+    );
+    assert!(e.len() < 400, "{e}");
+    // the advice names the flag of the command: --regions, not handles
+    let e = refused(
+        d,
+        &[
+            "dataset",
+            "pairs",
+            "--mesh",
+            "builtin:capsule",
+            "--out",
+            "p",
+            "--regions",
+            "400",
+        ],
+        "use fewer regions (--regions)",
+    );
+    assert!(!e.contains("fewer handles"), "{e}");
+    assert!(!d.join("g").exists() && !d.join("p").exists());
     // header counts are enforced
     fs::write(
         d.join("extra.off"),
@@ -265,6 +300,20 @@ property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_he
         d,
         &["noise", "ico.ply", "--tau", "1e-15", "--out", "t.npy"],
         "at least 1e-10 x Gamma",
+    );
+    refused(
+        d,
+        &[
+            "noise",
+            "ico.ply",
+            "--kind",
+            "matern-normalized",
+            "--c",
+            "1e-20",
+            "--out",
+            "t.npy",
+        ],
+        "invalid parameter c: expected at least 1e-10",
     );
     ok(d, &["noise", "ico.ply", "--tau", "0", "--out", "t0.npy"]);
     let o = ok(d, &["noise", "ico.ply", "--tau", "1e300", "--out", "t.npy"]);
@@ -554,6 +603,25 @@ fn runs_survive_signals_edits_moves_and_damage() {
         ],
         "inside the input folder",
     );
+    // --force never writes into a dataset or run folder
+    let mesh = fs::read(d.join("data/reference/mesh.ply")).unwrap();
+    for out in ["data/reference", "run"] {
+        refused(
+            d,
+            &[
+                "sample",
+                "--run",
+                "run",
+                "--mesh",
+                "data/reference/mesh.ply",
+                "--out",
+                out,
+                "--force",
+            ],
+            "--force never writes into",
+        );
+    }
+    assert_eq!(fs::read(d.join("data/reference/mesh.ply")).unwrap(), mesh);
 
     // the final model is checksummed: a flipped byte is named
     let weights = d.join("run/model.safetensors");
@@ -628,6 +696,16 @@ fn runs_survive_signals_edits_moves_and_damage() {
         "{}",
         err(&o)
     );
+    // a finished run without its checkpoints is not retrained over its model
+    let finished = moved.join("run");
+    let model = fs::read(finished.join("model.safetensors")).unwrap();
+    fs::remove_dir_all(finished.join("checkpoints")).unwrap();
+    refused(
+        &moved,
+        &["train", "--out", "run", "--resume", "--quiet"],
+        "no valid checkpoint",
+    );
+    assert_eq!(fs::read(finished.join("model.safetensors")).unwrap(), model);
 
     // SIGTERM (kill, timeout, Slurm, docker stop) checkpoints like Ctrl-C
     let long = TINY
@@ -656,6 +734,13 @@ fn runs_survive_signals_edits_moves_and_damage() {
         assert!(t0.elapsed().as_secs() < 120, "training did not start");
         std::thread::sleep(std::time::Duration::from_millis(50));
     }
+    // one writer per run folder: a second one is refused naming the first
+    let e = refused(
+        &moved,
+        &["train", "--out", "long", "--resume", "--quiet"],
+        &format!("long is in use by PID {}", child.id()),
+    );
+    assert!(e.contains("--config long.toml"), "{e}");
     let status = Command::new("kill")
         .args(["-TERM", &child.id().to_string()])
         .status()
@@ -667,4 +752,221 @@ fn runs_survive_signals_edits_moves_and_damage() {
         .unwrap()
         .collect();
     assert_eq!(checkpoints.len(), 1, "one checkpoint written on SIGTERM");
+    assert!(
+        !moved.join(".long.mfm-lock").exists(),
+        "the lock goes with its holder"
+    );
+}
+
+/// Borrowed arguments of owned ones.
+#[cfg(feature = "network")]
+fn run(a: &[String]) -> Vec<&str> {
+    a.iter().map(String::as_str).collect()
+}
+
+/// Flips one byte near the end of `path`; returns the original bytes.
+#[cfg(feature = "network")]
+fn damage(path: &Path) -> Vec<u8> {
+    let good = fs::read(path).unwrap();
+    let mut bad = good.clone();
+    let k = bad.len() - 10;
+    bad[k] ^= 0x40;
+    fs::write(path, &bad).unwrap();
+    good
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn arbitrary_runs_check_their_models_and_keep_reports() {
+    let root = tempfile::tempdir().unwrap();
+    let d = root.path();
+    ok(
+        d,
+        &[
+            "dataset",
+            "pairs",
+            "--mesh",
+            "builtin:capsule",
+            "--out",
+            "data",
+            "--shapes",
+            "2",
+            "--poses",
+            "2",
+            "--reference",
+            "1",
+            "--handles",
+            "2",
+            "--radius",
+            "0.15",
+            "--regions",
+            "3",
+            "--coarse-faces",
+            "300",
+        ],
+    );
+    let train = |extra: &[&str]| {
+        let mut a = vec![
+            "train",
+            "--dataset",
+            "data/train",
+            "--steps",
+            "2",
+            "--quiet",
+        ];
+        a.extend_from_slice(extra);
+        a.into_iter().map(str::to_owned).collect::<Vec<_>>()
+    };
+    let args = train(&["--mode", "predictor", "--out", "pred"]);
+    ok(d, &args.iter().map(String::as_str).collect::<Vec<_>>());
+    let args = train(&["--mode", "arbitrary", "--predictor", "pred", "--out", "arb"]);
+    ok(d, &args.iter().map(String::as_str).collect::<Vec<_>>());
+    let sample = |out: &str| {
+        [
+            "sample",
+            "--run",
+            "arb",
+            "--source",
+            "data/eval.ply",
+            "--n",
+            "1",
+            "--ply",
+            "0",
+            "--out",
+            out,
+        ]
+        .map(str::to_owned)
+    };
+    ok(d, &run(&sample("t")));
+
+    // damaged or unchecked models are refused by name, nothing written
+    for (file, needle) in [
+        (
+            "arb/model.safetensors",
+            "model.safetensors: the final model file is corrupted",
+        ),
+        (
+            "arb/predictor.safetensors",
+            "predictor.safetensors: the final model file is corrupted",
+        ),
+    ] {
+        let good = damage(&d.join(file));
+        refused(d, &run(&sample("t2")), needle);
+        assert!(!d.join("t2").exists());
+        fs::write(d.join(file), good).unwrap();
+    }
+    let good = damage(&d.join("pred/model.safetensors"));
+    let args = train(&[
+        "--mode",
+        "arbitrary",
+        "--predictor",
+        "pred",
+        "--out",
+        "arb2",
+    ]);
+    refused(
+        d,
+        &run(&args),
+        "model.safetensors: the final model file is corrupted",
+    );
+    assert!(!d.join("arb2").exists());
+    fs::write(d.join("pred/model.safetensors"), good).unwrap();
+    let record = d.join("arb/model.state.json");
+    let kept = fs::read(&record).unwrap();
+    fs::remove_file(&record).unwrap();
+    refused(d, &run(&sample("t2")), "model.state.json: missing");
+    fs::write(&record, kept).unwrap();
+
+    // a predictor run is not sampled; the message says what to do instead
+    refused(
+        d,
+        &[
+            "sample",
+            "--run",
+            "pred",
+            "--source",
+            "data/eval.ply",
+            "--out",
+            "t3",
+        ],
+        "--mode arbitrary --predictor",
+    );
+
+    // --force never writes into a dataset, experiment or run folder
+    let mesh = fs::read(d.join("data/reference/mesh.ply")).unwrap();
+    for out in ["data/reference", "data", "arb", "pred"] {
+        let mut a = sample(out).to_vec();
+        a.push("--force".into());
+        refused(d, &run(&a), "--force never writes into");
+    }
+    assert_eq!(fs::read(d.join("data/reference/mesh.ply")).unwrap(), mesh);
+
+    // eval-arbitrary: no empty evaluation; an earlier report is kept without --force
+    let eval = |extra: &[&str]| {
+        let mut a = vec![
+            "eval-arbitrary",
+            "--run",
+            "arb",
+            "--experiment",
+            "data",
+            "--out",
+            "ev",
+        ];
+        a.extend_from_slice(extra);
+        a.into_iter().map(str::to_owned).collect::<Vec<_>>()
+    };
+    refused(
+        d,
+        &run(&eval(&["--sources", "0"])),
+        "--sources must be at least 1",
+    );
+    refused(
+        d,
+        &run(&eval(&["--per-source", "0"])),
+        "--per-source must be at least 1",
+    );
+    assert!(!d.join("ev").exists());
+    ok(d, &run(&eval(&["--sources", "1", "--per-source", "1"])));
+    let report = fs::read(d.join("ev/report.json")).unwrap();
+    refused(
+        d,
+        &run(&eval(&[
+            "--sources",
+            "1",
+            "--per-source",
+            "1",
+            "--seed",
+            "3",
+        ])),
+        "--force",
+    );
+    assert_eq!(fs::read(d.join("ev/report.json")).unwrap(), report);
+    let args = eval(&[
+        "--sources",
+        "1",
+        "--per-source",
+        "1",
+        "--seed",
+        "3",
+        "--force",
+    ]);
+    ok(d, &run(&args));
+
+    // a finished run without its checkpoints is not retrained over its model
+    let model = fs::read(d.join("arb/model.safetensors")).unwrap();
+    fs::remove_dir_all(d.join("arb/checkpoints")).unwrap();
+    refused(
+        d,
+        &[
+            "train",
+            "--mode",
+            "arbitrary",
+            "--resume",
+            "--out",
+            "arb",
+            "--quiet",
+        ],
+        "no valid checkpoint",
+    );
+    assert_eq!(fs::read(d.join("arb/model.safetensors")).unwrap(), model);
 }

@@ -65,6 +65,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{DataError, Result};
 use crate::signals::InMemorySignals;
+use mfm_files::fmt_f64;
 use mfm_geometry::geodesic::HeatGeodesics;
 
 /// Name of this generator in dataset manifests.
@@ -441,12 +442,12 @@ impl GmmGenerator {
             }
             if !placed {
                 return Err(DataError::Config(format!(
-                    "could not place bump {} of {k} at least {:.4} (min_separation {} x sigma {:.4}) \
+                    "could not place bump {} of {k} at least {} (min_separation {} x sigma {}) \
                      from the others in {} draws; lower gmm.min_separation or gmm.sigma",
                     bump + 1,
-                    self.separation,
-                    self.config.min_separation,
-                    self.sigma,
+                    fmt_f64(self.separation),
+                    fmt_f64(self.config.min_separation),
+                    fmt_f64(self.sigma),
                     self.config.max_attempts
                 )));
             }

@@ -100,9 +100,19 @@ pub enum DeformError {
 
     /// The mesh has fewer vertices than automatic handle placement needs, or
     /// too few reachable vertices to pick the requested number of handles.
-    #[error("cannot place {requested} handles: {reason}")]
+    #[error("cannot place {requested} handles: {reason}; use a smaller radius or fewer handles")]
     HandlePlacement {
         /// Number of handles requested (anchor included).
+        requested: usize,
+        /// What went wrong.
+        reason: String,
+    },
+
+    /// Too few vertices lie far enough apart for the requested number of
+    /// shape regions ([`crate::ShapeFamily::auto`]).
+    #[error("cannot place {requested} shape regions: {reason}; use fewer regions (--regions)")]
+    RegionPlacement {
+        /// Number of regions requested (the centre one included).
         requested: usize,
         /// What went wrong.
         reason: String,

@@ -210,7 +210,7 @@ impl HandleSet {
                 return Err(placement_error(format!(
                     "only {k} moving handles fit: every other vertex connected to the anchor \
                      has a vertex within {reach:e} (radius plus mean edge length) of it and of \
-                     a center chosen so far; use a smaller radius fraction or fewer handles"
+                     a center chosen so far"
                 )));
             };
             mark(v, &mut near);

@@ -112,7 +112,13 @@ impl ShapeFamily {
                 found: "0".into(),
             });
         }
-        let placed = HandleSet::auto(template, count - 1, 0.05)?;
+        let placed = HandleSet::auto(template, count - 1, 0.05).map_err(|e| match e {
+            DeformError::HandlePlacement { reason, .. } => DeformError::RegionPlacement {
+                requested: count,
+                reason: reason.replace("moving handles", "regions besides the centre one"),
+            },
+            other => other,
+        })?;
         let radius = DEFAULT_REGION_RADIUS * template.bounding_box_diagonal();
         Ok(Self {
             regions: placed

@@ -81,6 +81,17 @@ pub enum FileError {
         /// The folder as given.
         path: PathBuf,
     },
+    /// Another process holds the folder's lock ([`crate::FolderLock`]).
+    #[error(
+        "{} is in use by {holder}; wait for it to finish (or stop it) and run again (nothing was written)",
+        path.display()
+    )]
+    Locked {
+        /// The folder as given.
+        path: PathBuf,
+        /// Who holds it: `PID N (command)`.
+        holder: String,
+    },
     /// A file's contents are not what was expected.
     #[error("{}: {message}", path.display())]
     Format {

@@ -14,6 +14,8 @@
 //! - [`undo`]: [`Undo`], which removes what a failed command created (and
 //!   only that); [`Outputs::prepare`] checks a command's outputs and returns
 //!   the [`Undo`] for them.
+//! - [`lock`]: [`FolderLock`], one writer per run, dataset or sample
+//!   folder (an advisory lock beside it, naming its holder).
 //! - [`matrix_market`]: sparse matrices as Matrix Market coordinate files.
 //! - [`space`]: free space on the file system of a path.
 //! - [`npy`]: reading `.npy` arrays (shape checked against the file's length
@@ -28,6 +30,7 @@
 pub mod atomic;
 pub mod error;
 pub mod guard;
+pub mod lock;
 pub mod matrix_market;
 pub mod npy;
 pub mod space;
@@ -37,5 +40,6 @@ pub mod undo;
 pub use atomic::{AtomicFile, write_atomic, write_json};
 pub use error::FileError;
 pub use guard::{Outputs, ensure_empty_dir};
+pub use lock::FolderLock;
 pub use text::fmt_f64;
 pub use undo::Undo;

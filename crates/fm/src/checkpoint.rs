@@ -465,14 +465,44 @@ pub struct FinalModelRecord {
 /// # Errors
 /// [`FmError::Files`] (`Io`) naming the file.
 pub fn write_final_record(run_dir: &Path) -> Result<()> {
+    write_file_record(run_dir, FINAL_RECORD_FILE, &[WEIGHTS_FILE, NET_CONFIG_FILE])
+}
+
+/// Records the size and CRC-32 of the files `names` of `dir` in the
+/// [`FinalModelRecord`] file `record` (in `dir`): what
+/// [`verify_file_record`] checks them against.
+///
+/// # Errors
+/// [`FmError::Files`] (`Io`) naming the file.
+pub fn write_file_record(dir: &Path, record: &str, names: &[&str]) -> Result<()> {
     let mut files = BTreeMap::new();
-    for name in [WEIGHTS_FILE, NET_CONFIG_FILE] {
-        files.insert(name.to_owned(), file_record(&run_dir.join(name))?);
+    for name in names {
+        files.insert((*name).to_owned(), file_record(&dir.join(name))?);
     }
-    let path = run_dir.join(FINAL_RECORD_FILE);
+    let path = dir.join(record);
     let json = serde_json::to_string_pretty(&FinalModelRecord { files })
         .map_err(|e| FmError::format(&path, e.to_string()))?;
     write_atomic(&path, json.as_bytes())
+}
+
+/// Checks the files recorded in `dir`'s [`FinalModelRecord`] file `record`
+/// ([`write_file_record`]); unlike [`verify_final_model`], a missing record
+/// is an error: the files beside it cannot be trusted unchecked.
+///
+/// # Errors
+/// [`FmError::Files`] (`Format`) naming the missing record, or the file
+/// that is truncated or corrupted.
+pub fn verify_file_record(dir: &Path, record: &str) -> Result<()> {
+    let path = dir.join(record);
+    if !path.is_file() {
+        return Err(FmError::format(
+            &path,
+            "missing: the checksums of the model files beside it are gone, so they cannot be \
+             checked; copy the whole run folder again, or train the run anew"
+                .to_owned(),
+        ));
+    }
+    read_and_verify_record(dir, &path)
 }
 
 /// Checks the final model of `run_dir` against its [`FINAL_RECORD_FILE`];
@@ -483,18 +513,40 @@ pub fn write_final_record(run_dir: &Path) -> Result<()> {
 /// unreadable record.
 pub fn verify_final_model(run_dir: &Path) -> Result<()> {
     let path = run_dir.join(FINAL_RECORD_FILE);
-    let text = match std::fs::read_to_string(&path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
-        Err(e) => return Err(FmError::io(&path, e)),
-    };
+    if !path.exists() {
+        return Ok(());
+    }
+    read_and_verify_record(run_dir, &path)
+}
+
+fn read_and_verify_record(dir: &Path, path: &Path) -> Result<()> {
+    let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
     let record: FinalModelRecord = serde_json::from_str(&text).map_err(|e| {
         FmError::format(
-            &path,
+            path,
             format!("unreadable model record (truncated or corrupted?): {e}"),
         )
     })?;
-    verify_records(run_dir, &record.files, "the final model file")
+    verify_records(dir, &record.files, "the final model file")
+}
+
+/// Refuses to train a run over its final model from step 0: called when
+/// resuming finds no valid checkpoint. A run folder holding a final model
+/// ([`WEIGHTS_FILE`]) but no checkpoint (deleted, or all damaged) is
+/// finished; restarting it would replace that model.
+///
+/// # Errors
+/// [`FmError::RunFolder`] naming the run and what to do.
+pub fn refuse_restart_over_final_model(run_dir: &Path) -> Result<()> {
+    if run_dir.join(WEIGHTS_FILE).exists() {
+        return Err(FmError::RunFolder(format!(
+            "{}: the run is finished ({WEIGHTS_FILE}) but has no valid checkpoint in \
+             {CHECKPOINTS_DIR}/ to continue from; --resume would train over the final model \
+             from step 0. Sample the final model as it is, or train a new run with another --out",
+            run_dir.display()
+        )));
+    }
+    Ok(())
 }
 
 /// Writes the checkpoint after `state.step` steps: `fill` writes the

@@ -13,7 +13,9 @@ use std::path::{Path, PathBuf};
 
 use mfm_geometry::TriMesh;
 
-use crate::checkpoint::{CHECKPOINTS_DIR, CONFIG_FILE, FLOW_FILE, NET_CONFIG_FILE, WEIGHTS_FILE};
+use crate::checkpoint::{
+    CHECKPOINTS_DIR, CONFIG_FILE, FLOW_FILE, LOG_FILE, NET_CONFIG_FILE, WEIGHTS_FILE,
+};
 use crate::config::RunConfig;
 use crate::error::{FmError, Result};
 use crate::sample::{
@@ -30,12 +32,20 @@ pub fn run_sample_options(run: &Path) -> SampleOptions {
 }
 
 /// Refuses an output folder that is not a folder, or one with anything in
-/// it unless `replace` (`mfm sample --force`), naming the files a sample
-/// folder holds (`writes`) so the user knows what would be replaced.
+/// it unless `replace` (`--force` of `command`, e.g. `mfm sample`), naming
+/// the files the command writes (`writes`) so the user knows what would be
+/// replaced. Even with `replace`, a dataset, experiment or training run
+/// folder ([`protected_folder_kind`]) is refused: `--force` replaces a
+/// command's own outputs, never another command's folder.
 ///
 /// # Errors
 /// [`FmError::RunFolder`].
-pub fn check_output_folder(out: &Path, replace: bool, writes: &[&str]) -> Result<()> {
+pub fn check_output_folder(
+    out: &Path,
+    replace: bool,
+    command: &str,
+    writes: &[&str],
+) -> Result<()> {
     if out.exists() && !out.is_dir() {
         return Err(FmError::RunFolder(format!(
             "--out {}: exists and is not a folder",
@@ -46,12 +56,46 @@ pub fn check_output_folder(out: &Path, replace: bool, writes: &[&str]) -> Result
     if non_empty && !replace {
         return Err(FmError::RunFolder(format!(
             "{} exists and is not empty; choose another --out, or add --force to replace what \
-`mfm sample` writes there ({}, sample_NNN.ply; nothing else is touched)",
+`{command}` writes there ({}; nothing else is touched)",
             out.display(),
             writes.join(", ")
         )));
     }
+    if let Some((kind, marker)) = protected_folder_kind(out) {
+        return Err(FmError::RunFolder(format!(
+            "--out {}: is {kind} (it holds {marker}); --force never writes into a dataset, \
+experiment or run folder: choose another --out",
+            out.display()
+        )));
+    }
     Ok(())
+}
+
+/// What kind of mfm folder `dir` is, when it is one no other command may
+/// write into, and the file that shows it: a dataset (`manifest.json`), an
+/// experiment (a `train/`, `reference/` or `holdout/` dataset, a
+/// deformation or pair space), or a training run of any mode (its config,
+/// flow description, log or checkpoints).
+pub fn protected_folder_kind(dir: &Path) -> Option<(&'static str, String)> {
+    use mfm_data::dataset::MANIFEST_FILE;
+    use mfm_data::layout::{HOLDOUT, PAIR_SPACE, REFERENCE, SPACE, TRAIN};
+    let has = |rel: &str| dir.join(rel).exists().then(|| rel.to_owned());
+    let dataset = has(MANIFEST_FILE).map(|m| ("a dataset folder", m));
+    let experiment = || {
+        [TRAIN, REFERENCE, HOLDOUT]
+            .iter()
+            .find_map(|set| has(&format!("{set}/{MANIFEST_FILE}")))
+            .or_else(|| has(SPACE))
+            .or_else(|| has(PAIR_SPACE))
+            .map(|m| ("an experiment folder", m))
+    };
+    let run = || {
+        [CONFIG_FILE, FLOW_FILE, LOG_FILE, CHECKPOINTS_DIR]
+            .iter()
+            .find_map(|f| has(f))
+            .map(|m| ("a training run folder", m))
+    };
+    dataset.or_else(experiment).or_else(run)
 }
 
 /// What [`SampleFolder::write`] draws and where.

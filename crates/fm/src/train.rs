@@ -605,6 +605,7 @@ impl Trainer {
             if let Some((_, err)) = skipped.into_iter().next() {
                 return Err(err);
             }
+            checkpoint::refuse_restart_over_final_model(&run_dir)?;
             let config = with_device(RunConfig::from_toml_file(run_dir.join(CONFIG_FILE))?);
             config.validate()?;
             check_signals(mesh, signals.as_ref())?;

@@ -524,6 +524,14 @@ impl NoiseSampler {
                         found: format!("c = {c}, Gamma = {gamma}"),
                     });
                 }
+                if c < ZERO_TAU_REGULARIZATION {
+                    return Err(NoiseError::InvalidParameter {
+                        name: "c",
+                        expected: "at least 1e-10 (tau = c x Gamma; a smaller screening has \
+                                   no reliable factorization)",
+                        found: format!("{}, below 1e-10 (tau = {})", fmt_f64(c), fmt_f64(tau)),
+                    });
+                }
                 (
                     Some(tau),
                     gamma.sqrt(),
