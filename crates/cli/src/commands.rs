@@ -63,6 +63,21 @@ pub enum Command {
     /// PoissonNet tables and benchmarks (needs the `network` feature).
     #[cfg(not(feature = "network"))]
     Net(crate::unavailable::Unavailable),
+    /// Import a pretrained model of the official Matérn-FM code (a Lightning
+    /// .ckpt and its YAML config) as an mfm run folder that `mfm sample` and
+    /// `mfm eval` use.
+    #[cfg(feature = "network")]
+    Import(crate::official::ImportArgs),
+    /// Import an official checkpoint (needs the `network` feature).
+    #[cfg(not(feature = "network"))]
+    Import(crate::unavailable::Unavailable),
+    /// Write a run's weights under the official names, as a checkpoint the
+    /// official Matérn-FM code loads.
+    #[cfg(feature = "network")]
+    ExportWeights(crate::official::ExportArgs),
+    /// Export a run's weights (needs the `network` feature).
+    #[cfg(not(feature = "network"))]
+    ExportWeights(crate::unavailable::Unavailable),
     /// Another triangulation of a mesh's surface: midpoint subdivision, and
     /// damage (holes, a partial cut, edge flips) that spares the handle
     /// regions of a deformation space.
@@ -90,6 +105,10 @@ pub fn run(cmd: Command) -> Result<()> {
         Command::Net(cmd) => crate::net::run(cmd),
         #[cfg(feature = "network")]
         Command::EvalArbitrary(args) => crate::arbitrary::eval(args),
+        #[cfg(feature = "network")]
+        Command::Import(args) => crate::official::import(args),
+        #[cfg(feature = "network")]
+        Command::ExportWeights(args) => crate::official::export(args),
         #[cfg(not(feature = "network"))]
         Command::Train(_) => crate::unavailable::fail("train"),
         #[cfg(not(feature = "network"))]
@@ -98,5 +117,9 @@ pub fn run(cmd: Command) -> Result<()> {
         Command::Net(_) => crate::unavailable::fail("net"),
         #[cfg(not(feature = "network"))]
         Command::EvalArbitrary(_) => crate::unavailable::fail("eval-arbitrary"),
+        #[cfg(not(feature = "network"))]
+        Command::Import(_) => crate::unavailable::fail("import"),
+        #[cfg(not(feature = "network"))]
+        Command::ExportWeights(_) => crate::unavailable::fail("export-weights"),
     }
 }

@@ -9,7 +9,7 @@ use mfm_fm::config::{DeviceChoice, OdeMethod, RunConfig};
 use mfm_fm::run_folder::{Overrides, RunFolder};
 use mfm_fm::sample::{SAMPLE_FILES, Sampler};
 use mfm_fm::sample_folder::{SampleFolder, check_output_folder, run_sample_options};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -85,9 +85,16 @@ pub struct SampleArgs {
     /// triangulation; targets are generated over it.
     #[arg(long)]
     pub(crate) source: Option<String>,
-    /// Number of samples.
+    /// Number of samples (with --x0: the file's count).
     #[arg(long, default_value_t = 16)]
     pub(crate) n: usize,
+    /// Start the ODE from these noises instead of drawing them: a .npy of
+    /// shape [N, V, C] (float32 or float64; V the --mesh's vertices, C the
+    /// run's channels), used as given (not scaled or centred), in the run's
+    /// training frame (the identity for `mfm import`ed runs). Gives N
+    /// samples; --seed is then unused.
+    #[arg(long, conflicts_with_all = ["n", "source", "seed"])]
+    pub(crate) x0: Option<PathBuf>,
     /// ODE steps (default: the run's sample.steps).
     #[arg(long)]
     pub(crate) steps: Option<usize>,
@@ -238,11 +245,45 @@ pub fn train(a: TrainArgs) -> Result<()> {
     Ok(())
 }
 
+/// Reads the `--x0` starting noise: a float `[N, V, C]` `.npy`.
+fn read_start_noise(path: &Path) -> Result<mfm_fm::sample::StartNoise> {
+    let array = mfm_files::npy::read::<f32>(path)?;
+    let shape = array.shape.clone();
+    let [n, v, c] = shape[..] else {
+        bail!(
+            "--x0 {}: shape {shape:?}; starting noise must be [samples, vertices, channels]",
+            path.display()
+        );
+    };
+    if n == 0 || v == 0 || c == 0 {
+        bail!("--x0 {}: shape {shape:?} holds no noise", path.display());
+    }
+    let values = array.values;
+    if let Some(i) = values.iter().position(|x| !x.is_finite()) {
+        bail!(
+            "--x0 {}: value {} (sample {}, vertex {}, channel {}) is not finite",
+            path.display(),
+            values[i],
+            i / (v * c),
+            (i / c) % v,
+            i % c
+        );
+    }
+    Ok(mfm_fm::sample::StartNoise {
+        values,
+        shape: [n, v, c],
+    })
+}
+
 /// Runs `mfm sample`.
 pub fn sample(a: SampleArgs) -> Result<()> {
     if a.n == 0 {
         bail!("--n must be at least 1");
     }
+    let start = match &a.x0 {
+        Some(path) => Some(read_start_noise(path)?),
+        None => None,
+    };
     let _lock = crate::output::lock_folder(&a.out)?;
     check_output_folder(&a.out, a.force, "mfm sample", &SAMPLE_FILES)?;
     if crate::arbitrary::is_arbitrary_run(&a.run) {
@@ -274,7 +315,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     };
     let mesh = load_mesh_checked(mesh_arg)?;
     let device = Some(a.device.resolve()?);
-    let sampler = match a.step {
+    let mut sampler = match a.step {
         None => Sampler::load(&a.run, device)?,
         Some(step) => {
             let dir = mfm_fm::checkpoint::checkpoint_dir(&a.run, step);
@@ -297,6 +338,22 @@ pub fn sample(a: SampleArgs) -> Result<()> {
             Sampler::load_checkpoint_weights(&dir, device, !a.raw_weights)?
         }
     };
+    let count = match start {
+        None => a.n,
+        Some(start) => {
+            let [n, v, c] = start.shape;
+            let (mv, rc) = (mesh.num_vertices(), sampler.flow().channels);
+            if v != mv || c != rc {
+                bail!(
+                    "--x0 {}: shape [{n}, {v}, {c}], but --mesh {mesh_arg} with this run needs [{n}, {mv}, {rc}] \
+                     ([samples, the mesh's vertices, the run's channels])",
+                    a.x0.as_deref().unwrap_or(Path::new("")).display()
+                );
+            }
+            sampler = sampler.with_start_noise(start)?;
+            n
+        }
+    };
     for w in sampler.surface_warnings(&mesh) {
         eprintln!(
             "warning: {mesh_arg}: {w}; the run's frame assumes the sampling mesh is the training surface in the dataset's units"
@@ -316,7 +373,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         run: &a.run,
         mesh_file: mesh_path(mesh_arg),
         out: &a.out,
-        count: a.n,
+        count,
         seed: a.seed,
         ply: a.ply,
         progress: true,

@@ -13,6 +13,8 @@ mod flow;
 mod mesh;
 #[cfg(feature = "network")]
 mod net;
+#[cfg(feature = "network")]
+mod official;
 mod output;
 mod spectral;
 #[cfg(not(feature = "network"))]

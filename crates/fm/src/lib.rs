@@ -14,6 +14,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod context;
 pub mod error;
+pub mod official;
 pub mod run_folder;
 pub mod sample;
 pub mod sample_folder;

@@ -254,6 +254,17 @@ pub struct Sampler {
     net: PoissonNet,
     flow: FlowSpec,
     offset: Option<Tensor>,
+    start: Option<StartNoise>,
+}
+
+/// Starting states given by the user ([`Sampler::with_start_noise`]) in
+/// place of drawn noise: `[samples, vertices, channels]` values.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StartNoise {
+    /// Row-major values.
+    pub values: Vec<f32>,
+    /// `[samples, vertices, channels]`.
+    pub shape: [usize; 3],
 }
 
 impl Sampler {
@@ -284,7 +295,44 @@ impl Sampler {
             }
         }
         let offset = offset_tensor(&flow, net.device());
-        Ok(Self { net, flow, offset })
+        Ok(Self {
+            net,
+            flow,
+            offset,
+            start: None,
+        })
+    }
+
+    /// Starts the ODE of sample `i` from `start`'s sample `i` instead of
+    /// drawing noise: the values are the integration's initial state as
+    /// given, in the run's training frame (the identity for imported runs),
+    /// neither scaled nor centred. The seed is then unused.
+    ///
+    /// # Errors
+    /// [`FmError::Config`] when the values do not fill the shape or the
+    /// channels differ from the run's.
+    pub fn with_start_noise(mut self, start: StartNoise) -> Result<Self> {
+        let [n, v, c] = start.shape;
+        if n.checked_mul(v).and_then(|x| x.checked_mul(c)) != Some(start.values.len()) {
+            return Err(FmError::Config(format!(
+                "starting noise of shape {:?} holds {} values",
+                start.shape,
+                start.values.len()
+            )));
+        }
+        if c != self.flow.channels {
+            return Err(FmError::Config(format!(
+                "starting noise has shape [{n}, {v}, {c}]: {c} channels where the run's signals have {}",
+                self.flow.channels
+            )));
+        }
+        self.start = Some(start);
+        Ok(self)
+    }
+
+    /// The starting noise given with [`Sampler::with_start_noise`].
+    pub fn start_noise(&self) -> Option<&StartNoise> {
+        self.start.as_ref()
     }
 
     /// Loads a trained run: `run_dir/model.safetensors` (the final model)
@@ -575,10 +623,12 @@ impl Sampler {
     /// The starting noise of samples `first .. first + count` of `seed` on
     /// the target: `[count, V, C]` `f32` on the network's device (the run's
     /// noise kind, times its scale, centred by its mass-weighted mean for a
-    /// centred run).
+    /// centred run), or those samples of the starting noise given with
+    /// [`Sampler::with_start_noise`], as given.
     ///
     /// # Errors
-    /// Noise sampling errors.
+    /// Noise sampling errors; [`FmError::Config`] when the given starting
+    /// noise does not have these samples on this mesh.
     pub fn noise(
         &self,
         target: &TargetMesh,
@@ -587,6 +637,21 @@ impl Sampler {
         seed: u64,
     ) -> Result<Tensor> {
         let (v, c) = (target.num_vertices() as i64, self.flow.channels);
+        if let Some(start) = &self.start {
+            let [n, sv, sc] = start.shape;
+            if sv as i64 != v || first + count > n {
+                return Err(FmError::Config(format!(
+                    "starting noise has shape [{n}, {sv}, {sc}]; samples {first}..{} on this mesh need [{}, {v}, {c}]",
+                    first + count,
+                    first + count
+                )));
+            }
+            let row = sv * sc;
+            let x = Tensor::from_slice(&start.values[first * row..(first + count) * row])
+                .reshape([count as i64, v, c as i64])
+                .to_device(self.net.device());
+            return Ok(x);
+        }
         let batch = target.noise.sample_range_f32(first, count, c, seed)?;
         let scale = self.flow.noise_scale as f32;
         let mut values = batch.into_data();

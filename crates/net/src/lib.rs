@@ -20,6 +20,8 @@
 //!   [`config`]: [`PoissonNetConfig`] with the presets `paper`, `medium`,
 //!   `small`.
 //! - [`loss`]: mass- and area-weighted MSE, the flow-matching loss.
+//! - [`official`]: the official PoissonNet's parameter names and the map
+//!   between them and this crate's variables (`mfm import`, `mfm export-weights`).
 //! - `bench` (with the `bench` feature, which also builds the kernels'
 //!   section timers): `bench::bench_training_step`, what `mfm net bench`
 //!   runs. Training and sampling do not need it.
@@ -111,6 +113,7 @@ pub mod error;
 pub mod layers;
 pub mod loss;
 pub mod model;
+pub mod official;
 
 pub use config::{HeadKind, PRESETS, PoissonNetConfig};
 pub use error::{KernelError, NetError, Result};
