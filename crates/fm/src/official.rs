@@ -606,7 +606,7 @@ pub fn import_official(
     checkpoint::write_final_record(out)?;
     flow.write(out.join(FLOW_FILE))?;
     run_config.write_toml_file(out.join(CONFIG_FILE))?;
-    mfm_files::write_json(&out.join(IMPORT_FILE), &record)?;
+    mfm_files::write_json(out.join(IMPORT_FILE), &record)?;
     undo.keep();
     Ok(record)
 }
@@ -653,6 +653,7 @@ pub const IMPORTED_FILES: [&str; 6] = [
 ];
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

@@ -8,6 +8,7 @@
 //! MLP on the gradients with modulation, Poisson solve, vertex MLPs on
 //! `[x, u, conditioning]` with the skips; NJF head with the input-gradient
 //! residual), on operators it builds itself.
+#![allow(clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

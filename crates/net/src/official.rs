@@ -270,6 +270,7 @@ pub fn official_state_dict(
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
     use crate::config::PoissonNetConfig;

@@ -155,7 +155,7 @@ impl Checkpoint {
             .ok_or_else(|| fail(format!("a storage of {} elements", t.storage_numel)))?;
         let name = format!("{}data/{}", self.prefix, t.storage);
         let raw = read_record(&mut self.zip, &name, expected as u64 + 1)
-            .map_err(|m| fail(m))?
+            .map_err(fail)?
             .ok_or_else(|| fail(format!("its storage record {name} is missing")))?;
         if raw.len() != expected {
             return Err(fail(format!(

@@ -194,6 +194,7 @@ fn f16_to_f32(h: u16) -> f32 {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 
