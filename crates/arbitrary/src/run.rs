@@ -199,7 +199,9 @@ impl Optimization {
             }
             self.adam.zero_grad();
             let s = self.step;
-            let loss = step_fn(&self.net, s)?;
+            let loss = step_fn(&self.net, s).map_err(|e| {
+                mfm_fm::train::divergence(&self.net, s, what, "the learning rate", e)
+            })?;
             if !loss.is_finite() {
                 return Err(FmError::Diverged(format!(
                     "{what} diverged at step {s}: the loss is {loss}; lower the learning rate \

@@ -970,3 +970,106 @@ fn arbitrary_runs_check_their_models_and_keep_reports() {
     );
     assert_eq!(fs::read(d.join("arb/model.safetensors")).unwrap(), model);
 }
+
+/// Writes `values` as a 1-D little-endian `f64` `.npy` file.
+fn write_npy(path: &Path, values: &[f64]) {
+    let dict = format!(
+        "{{'descr': '<f8', 'fortran_order': False, 'shape': ({},), }}",
+        values.len()
+    );
+    // magic (6) + version (2) + header length (2) + dict + newline: a multiple of 64
+    let pad = (64 - (10 + dict.len() + 1) % 64) % 64;
+    let header = format!("{dict}{}\n", " ".repeat(pad));
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&u16::try_from(header.len()).unwrap().to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    for v in values {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn render_says_when_scalars_are_not_finite() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    // builtin:icosphere:1 has 42 vertices
+    write_npy(&d.join("nan.npy"), &[f64::NAN; 42]);
+    let mut mixed: Vec<f64> = (0..42).map(f64::from).collect();
+    mixed[3] = f64::NAN;
+    mixed[7] = f64::INFINITY;
+    write_npy(&d.join("mixed.npy"), &mixed);
+    fn render<'a>(scalars: &'a str, out: &'a str) -> [&'a str; 8] {
+        [
+            "render",
+            "builtin:icosphere:1",
+            "--scalars",
+            scalars,
+            "--size",
+            "64",
+            "--out",
+            out,
+        ]
+    }
+    refused(
+        d,
+        &render("nan.npy", "nan.png"),
+        "nan.npy: all 42 values are non-finite (NaN or inf)",
+    );
+    assert!(!d.join("nan.png").exists());
+    let o = ok(d, &render("mixed.npy", "mixed.png"));
+    assert!(
+        err(&o).contains("warning: mixed.npy: 2 of 42 values are non-finite"),
+        "{}",
+        err(&o)
+    );
+    assert!(d.join("mixed.png").is_file());
+    let o = ok(d, &render("mixed.npy", "again.png"));
+    assert_eq!(err(&o).matches("warning").count(), 1, "{}", err(&o));
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn training_divergence_names_the_step_and_the_rate() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "data",
+            "--n",
+            "4",
+            "--reference",
+            "2",
+        ],
+    );
+    fs::write(
+        d.join("lr.toml"),
+        TINY.replace("log_every = 1\n", "log_every = 1\nlr = 1e6\n"),
+    )
+    .unwrap();
+    let e = refused(
+        d,
+        &[
+            "train",
+            "--config",
+            "lr.toml",
+            "--dataset",
+            "data/train",
+            "--out",
+            "run",
+            "--quiet",
+        ],
+        "training diverged at step 1",
+    );
+    assert!(e.contains("lower train.lr"), "{e}");
+    assert!(
+        !d.join("run").exists(),
+        "no run folder without a checkpoint"
+    );
+}
