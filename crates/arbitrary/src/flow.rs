@@ -334,6 +334,14 @@ impl ArbitrarySampler {
     /// # Errors
     /// Missing or unreadable files, named; an unfinished run.
     pub fn load(run_dir: &Path) -> Result<Self> {
+        let kind = crate::folders::FolderKind::of(run_dir);
+        if kind != crate::folders::FolderKind::ArbitraryRun {
+            return Err(FmError::RunFolder(format!(
+                "{}: {}, not an arbitrary-source run (mfm train --mode arbitrary)",
+                run_dir.display(),
+                kind.is()
+            )));
+        }
         let spec: ArbitrarySpec = read_json(
             &run_dir.join(ARBITRARY_SPEC),
             "an arbitrary-source run's description",

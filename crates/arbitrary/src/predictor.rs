@@ -204,6 +204,16 @@ pub fn train(
         )));
     }
     let template = data.mesh().clone();
+    if template.num_vertices() < config.eigenvectors {
+        return Err(FmError::Config(format!(
+            "{}: the template has {} vertices, fewer than the {} eigenvectors the predictor \
+             learns: make the dataset from a finer mesh (mfm dataset pairs --mesh, refined with \
+             mfm remesh --subdivide 1, or a larger --coarse-faces)",
+            dataset.display(),
+            template.num_vertices(),
+            config.eigenvectors
+        )));
+    }
     std::fs::create_dir_all(run_dir).map_err(|e| FmError::io(run_dir, e))?;
     let spec_path = run_dir.join(PREDICTOR_SPEC);
     let targets_path = run_dir.join(TARGETS_FILE);
@@ -285,6 +295,14 @@ impl EigenPredictor {
     /// # Errors
     /// Missing or unreadable files, named.
     pub fn load(run_dir: &Path) -> Result<Self> {
+        let kind = crate::folders::FolderKind::of(run_dir);
+        if kind != crate::folders::FolderKind::PredictorRun {
+            return Err(FmError::RunFolder(format!(
+                "{}: {}, not an eigenvector predictor run (mfm train --mode predictor)",
+                run_dir.display(),
+                kind.is()
+            )));
+        }
         let spec: PredictorSpec = read_json(
             &run_dir.join(PREDICTOR_SPEC),
             "a predictor run's description",

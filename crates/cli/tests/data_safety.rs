@@ -973,10 +973,13 @@ fn arbitrary_runs_check_their_models_and_keep_reports() {
 
 /// Writes `values` as a 1-D little-endian `f64` `.npy` file.
 fn write_npy(path: &Path, values: &[f64]) {
-    let dict = format!(
-        "{{'descr': '<f8', 'fortran_order': False, 'shape': ({},), }}",
-        values.len()
-    );
+    write_npy_shaped(path, &[values.len()], values);
+}
+
+/// Writes `values` as a little-endian `f64` `.npy` file of `shape`.
+fn write_npy_shaped(path: &Path, shape: &[usize], values: &[f64]) {
+    let dims: String = shape.iter().map(|n| format!("{n},")).collect();
+    let dict = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({dims}), }}");
     // magic (6) + version (2) + header length (2) + dict + newline: a multiple of 64
     let pad = (64 - (10 + dict.len() + 1) % 64) % 64;
     let header = format!("{dict}{}\n", " ".repeat(pad));
@@ -1072,4 +1075,345 @@ fn training_divergence_names_the_step_and_the_rate() {
         !d.join("run").exists(),
         "no run folder without a checkpoint"
     );
+}
+
+#[test]
+fn errors_name_the_file_and_the_flag() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    // a degenerate (zero-area) face in --test-mesh names the flag and the file
+    // (vertex 3 on the edge 1-2: face 2 has no area)
+    let off = "OFF\n4 4 0\n0 0 1\n1 0 0\n0 1 0\n0.5 0.5 0\n3 0 2 1\n3 0 1 3\n3 1 2 3\n3 2 0 3\n";
+    fs::write(d.join("flat.off"), off).unwrap();
+    let e = refused(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--test-mesh",
+            "flat.off",
+            "--out",
+            "g",
+            "--n",
+            "2",
+            "--reference",
+            "1",
+        ],
+        "--test-mesh flat.off: 1 degenerate face (zero area), e.g. face 2",
+    );
+    assert!(!e.contains("geodesics"), "{e}");
+    assert!(!d.join("g").exists());
+    // an empty samples file names the file
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:1",
+            "--out",
+            "data",
+            "--n",
+            "2",
+            "--reference",
+            "2",
+        ],
+    );
+    write_npy_shaped(&d.join("none.npy"), &[0, 42, 1], &[]);
+    refused(
+        d,
+        &[
+            "eval",
+            "--samples",
+            "none.npy",
+            "--reference",
+            "data/reference",
+        ],
+        "none.npy: holds no samples (shape [0, 42, 1])",
+    );
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn wrong_folder_kinds_say_what_they_are() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    // a flow run, and a pairs experiment with a predictor and an arbitrary run
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "gmm",
+            "--n",
+            "4",
+            "--reference",
+            "0",
+        ],
+    );
+    fs::write(d.join("run.toml"), TINY).unwrap();
+    ok(
+        d,
+        &[
+            "train",
+            "--config",
+            "run.toml",
+            "--dataset",
+            "gmm/train",
+            "--out",
+            "flow",
+            "--quiet",
+        ],
+    );
+    ok(
+        d,
+        &[
+            "dataset",
+            "pairs",
+            "--mesh",
+            "builtin:capsule",
+            "--out",
+            "pairs",
+            "--shapes",
+            "2",
+            "--poses",
+            "2",
+            "--reference",
+            "1",
+            "--handles",
+            "2",
+            "--radius",
+            "0.15",
+            "--regions",
+            "3",
+            "--coarse-faces",
+            "300",
+        ],
+    );
+    let train = |extra: &[&str]| {
+        let mut a = vec!["train", "--steps", "2", "--quiet"];
+        a.extend_from_slice(extra);
+        a.into_iter().map(str::to_owned).collect::<Vec<_>>()
+    };
+    let pred = train(&[
+        "--mode",
+        "predictor",
+        "--dataset",
+        "pairs/train",
+        "--out",
+        "pred",
+    ]);
+    ok(d, &run(&pred));
+    let arb = train(&[
+        "--mode",
+        "arbitrary",
+        "--dataset",
+        "pairs/train",
+        "--predictor",
+        "pred",
+        "--out",
+        "arb",
+    ]);
+    ok(d, &run(&arb));
+
+    // --predictor: a flow run, an arbitrary run, nothing
+    for (given, what) in [
+        ("flow", "is a flow run (mfm train)"),
+        (
+            "arb",
+            "is an arbitrary-source run (mfm train --mode arbitrary)",
+        ),
+        ("nowhere", "does not exist"),
+    ] {
+        let args = train(&[
+            "--mode",
+            "arbitrary",
+            "--dataset",
+            "pairs/train",
+            "--predictor",
+            given,
+            "--out",
+            "x",
+        ]);
+        let e = refused(d, &run(&args), &format!("--predictor {given}: {what}"));
+        assert!(e.contains("mfm train --mode predictor"), "{e}");
+    }
+    // --resume with the wrong --mode, or without one
+    refused(
+        d,
+        &["train", "--resume", "--out", "pred", "--quiet"],
+        "--out pred: is an eigenvector predictor run (mfm train --mode predictor), not a flow \
+         run: continue it with --resume --mode predictor",
+    );
+    refused(
+        d,
+        &["train", "--resume", "--out", "arb", "--quiet"],
+        "continue it with --resume --mode arbitrary",
+    );
+    refused(
+        d,
+        &[
+            "train",
+            "--resume",
+            "--mode",
+            "predictor",
+            "--out",
+            "flow",
+            "--quiet",
+        ],
+        "--out flow: is a flow run (mfm train), not an eigenvector predictor run",
+    );
+    // --dataset an experiment folder: its sets are named
+    for mode in ["predictor", "flow"] {
+        let args = train(&[
+            "--mode",
+            mode,
+            "--preset",
+            "cpu",
+            "--dataset",
+            "pairs",
+            "--out",
+            "x",
+        ]);
+        let e = refused(
+            d,
+            &run(&args),
+            "this is an experiment folder, not a dataset folder",
+        );
+        assert!(e.contains("pairs/train"), "{e}");
+    }
+    // eval-arbitrary: a missing experiment, a set for an experiment, runs of other kinds
+    let eval = |run_dir: &str, experiment: &str| {
+        [
+            "eval-arbitrary",
+            "--run",
+            run_dir,
+            "--experiment",
+            experiment,
+            "--out",
+            "ev",
+        ]
+        .map(str::to_owned)
+    };
+    refused(
+        d,
+        &run(&eval("arb", "nowhere")),
+        "nowhere: no such folder (expected the experiment folder of mfm dataset pairs)",
+    );
+    refused(
+        d,
+        &run(&eval("arb", "pairs/train")),
+        "pairs/train: is a dataset folder (one set of an experiment), not an experiment folder",
+    );
+    refused(
+        d,
+        &run(&eval("pred", "pairs")),
+        "pred: is an eigenvector predictor run (mfm train --mode predictor), not an \
+         arbitrary-source run",
+    );
+    refused(
+        d,
+        &run(&eval("flow", "pairs")),
+        "flow: is a flow run (mfm train), not an arbitrary-source run",
+    );
+    assert!(!d.join("ev").exists() && !d.join("x").exists());
+
+    // a template with fewer vertices than the predictor's eigenvectors names the flags
+    ok(
+        d,
+        &[
+            "dataset",
+            "pairs",
+            "--mesh",
+            "builtin:icosphere:1",
+            "--out",
+            "p42",
+            "--shapes",
+            "2",
+            "--poses",
+            "2",
+            "--reference",
+            "1",
+            "--handles",
+            "2",
+            "--regions",
+            "3",
+        ],
+    );
+    let args = train(&[
+        "--mode",
+        "predictor",
+        "--dataset",
+        "p42/train",
+        "--out",
+        "x",
+    ]);
+    let e = refused(
+        d,
+        &run(&args),
+        "the template has 42 vertices, fewer than the 64 eigenvectors the predictor learns",
+    );
+    assert!(e.contains("--coarse-faces") && e.contains("--mesh"), "{e}");
+
+    // a TOML error on one line, without the parser's drawing
+    fs::write(d.join("bad.toml"), "[model]\nwidth = \"x\"\n").unwrap();
+    let e = refused(
+        d,
+        &[
+            "train",
+            "--config",
+            "bad.toml",
+            "--dataset",
+            "gmm/train",
+            "--out",
+            "x",
+        ],
+        "bad.toml: invalid run configuration: line 2, column 9: invalid type: string \"x\", \
+         expected usize (`width = \"x\"`)",
+    );
+    assert!(!e.contains("\\n") && e.lines().count() == 1, "{e}");
+
+    // resuming on a dataset of other channels names both
+    ok(
+        d,
+        &[
+            "dataset",
+            "deform",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "shapes",
+            "--n",
+            "3",
+            "--reference",
+            "0",
+            "--handles",
+            "2",
+            "--coarse-faces",
+            "320",
+        ],
+    );
+    let e = refused(
+        d,
+        &[
+            "train",
+            "--resume",
+            "--out",
+            "flow",
+            "--steps",
+            "6",
+            "--dataset",
+            "shapes/train",
+            "--quiet",
+        ],
+        "the dataset shapes/train has 3-channel signals, but the run flow was trained on \
+         1-channel ones",
+    );
+    assert!(e.contains("gmm/train"), "{e}");
+    assert!(!d.join("x").exists());
 }

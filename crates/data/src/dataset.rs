@@ -293,6 +293,25 @@ impl Dataset {
             ));
         }
         let manifest_path = dir.join(MANIFEST_FILE);
+        if !manifest_path.exists() {
+            use crate::layout::{HOLDOUT, REFERENCE, TRAIN};
+            let sets: Vec<String> = [TRAIN, REFERENCE, HOLDOUT]
+                .iter()
+                .filter(|s| dir.join(s).join(MANIFEST_FILE).is_file())
+                .map(|s| dir.join(s).display().to_string())
+                .collect();
+            if !sets.is_empty() {
+                return Err(DataError::format(
+                    &dir,
+                    format!(
+                        "this is an experiment folder, not a dataset folder: its datasets are {} \
+                         (give one of them, e.g. {})",
+                        sets.join(", "),
+                        sets[0]
+                    ),
+                ));
+            }
+        }
         let text = std::fs::read(&manifest_path).map_err(|e| DataError::io(&manifest_path, e))?;
         let manifest: Manifest = serde_json::from_slice(&text).map_err(|e| {
             DataError::format(&manifest_path, format!("not a valid dataset manifest: {e}"))
