@@ -256,7 +256,13 @@ pub fn train(
     let (batch, sigma) = (schedule.batch, config.sigma as f32);
     let device = Device::Cpu;
     let mut eigen_cache: HashMap<usize, Tensor> = HashMap::new();
-    let mut opt = Optimization::start_or_resume(run_dir, &config.net_config(k), schedule, device)?;
+    let mut opt = Optimization::start_or_resume(
+        run_dir,
+        ARBITRARY_SPEC,
+        &config.net_config(k),
+        schedule,
+        device,
+    )?;
     opt.run(stop, progress, "arbitrary-source flow", |net, step| {
         let mut rng = derived_rng(schedule.seed, PURPOSE_ITEMS, step);
         let mut total = 0.0;

@@ -255,7 +255,13 @@ pub fn train(
     let sources = SourceSet::new(&template, NoiseKind::Naive)?;
     let schedule = &config.schedule;
     let batch = schedule.batch;
-    let mut opt = Optimization::start_or_resume(run_dir, &config.net_config(), schedule, device)?;
+    let mut opt = Optimization::start_or_resume(
+        run_dir,
+        PREDICTOR_SPEC,
+        &config.net_config(),
+        schedule,
+        device,
+    )?;
     let n = meshes.len();
     opt.run(stop, progress, "predictor", |net, step| {
         let mut rng = derived_rng(schedule.seed, PURPOSE_ITEMS, step);

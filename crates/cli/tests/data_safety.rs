@@ -952,6 +952,45 @@ fn arbitrary_runs_check_their_models_and_keep_reports() {
     ]);
     ok(d, &run(&args));
 
+    // an edited run description: a model or optimisation change is refused
+    // by name and kept, a longer run accepted
+    for (spec, mode, model_dir) in [
+        ("pred/predictor.json", "predictor", "pred"),
+        ("arb/arbitrary.json", "arbitrary", "arb"),
+    ] {
+        let original = fs::read_to_string(d.join(spec)).unwrap();
+        assert!(original.contains("\"lr\": 0.001,"), "{original}");
+        let edited = original.replace("\"lr\": 0.001,", "\"lr\": 1000000.0,");
+        fs::write(d.join(spec), &edited).unwrap();
+        let resume = [
+            "train", "--resume", "--mode", mode, "--out", model_dir, "--quiet",
+        ];
+        let e = refused(
+            d,
+            &resume,
+            &format!(
+                "{spec} was edited after the checkpoint at step 2: config.schedule.lr 0.001 -> 1000000.0"
+            ),
+        );
+        assert!(e.contains("undo the edit"), "{e}");
+        assert_eq!(
+            fs::read_to_string(d.join(spec)).unwrap(),
+            edited,
+            "the edit is kept"
+        );
+        fs::write(
+            d.join(spec),
+            original.replace("\"steps\": 2,", "\"steps\": 3,"),
+        )
+        .unwrap();
+        let o = ok(d, &resume);
+        assert!(
+            String::from_utf8_lossy(&o.stdout).contains("steps 2..3 of 3"),
+            "{}",
+            String::from_utf8_lossy(&o.stdout)
+        );
+    }
+
     // a finished run without its checkpoints is not retrained over its model
     let model = fs::read(d.join("arb/model.safetensors")).unwrap();
     fs::remove_dir_all(d.join("arb/checkpoints")).unwrap();
