@@ -318,10 +318,20 @@ pub fn write_sample_folder(
         .inputs(f.source_file)
         .outputs(&outputs)
         .prepare()?;
+    let v = source.num_vertices();
+    // every target is held as f64 positions and written as f32
+    mfm_files::space::ensure_memory(
+        &format!("{n} targets x {v} vertices x 3 coordinates"),
+        (n as u128) * (v as u128) * 3,
+        12,
+    )?;
+    mfm_files::space::ensure_space(
+        &outputs[0],
+        mfm_files::npy::file_bytes(&[n as u64, v as u64, 3], 4),
+    )?;
     let t0 = std::time::Instant::now();
     let shapes = sampler.sample(source, 0, n, f.seed)?;
     let seconds = t0.elapsed().as_secs_f64();
-    let v = source.num_vertices();
     let flat: Vec<f32> = shapes
         .iter()
         .flat_map(|s| s.iter().flat_map(|p| p.map(|x| x as f32)))

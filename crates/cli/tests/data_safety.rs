@@ -877,6 +877,34 @@ fn arbitrary_runs_check_their_models_and_keep_reports() {
     refused(d, &run(&sample("t2")), "model.state.json: missing");
     fs::write(&record, kept).unwrap();
 
+    // more targets than any machine holds: refused before sampling
+    let mut a = sample("t4").to_vec();
+    a[6] = "100000000000000000".into();
+    too_big(
+        d,
+        &run(&a),
+        "100000000000000000 targets x 722 vertices x 3 coordinates: needs",
+        "t4",
+    );
+    too_big(
+        d,
+        &[
+            "eval-arbitrary",
+            "--run",
+            "arb",
+            "--experiment",
+            "data",
+            "--sources",
+            "1",
+            "--per-source",
+            "100000000000000000",
+            "--out",
+            "ev4",
+        ],
+        "1 sources x 100000000000000000 targets",
+        "ev4",
+    );
+
     // a predictor run is not sampled; the message says what to do instead
     refused(
         d,
@@ -1455,4 +1483,164 @@ fn wrong_folder_kinds_say_what_they_are() {
     );
     assert!(e.contains("gmm/train"), "{e}");
     assert!(!d.join("x").exists());
+}
+
+/// Runs and expects a refusal naming the memory it needs, with no panic or
+/// backtrace and nothing written at `out`.
+#[track_caller]
+fn too_big(dir: &Path, args: &[&str], needle: &str, out: &str) {
+    let e = refused(dir, args, needle);
+    assert!(e.contains("of memory, but this machine has"), "{e}");
+    assert!(
+        !e.contains("panicked") && !e.contains("backtrace") && e.lines().count() <= 4,
+        "{e}"
+    );
+    assert!(!dir.join(out).exists(), "{out} was left behind");
+}
+
+#[test]
+fn sizes_beyond_the_machine_are_refused_up_front() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    // beyond any machine's memory and address space (isize::MAX bytes)
+    let huge = "100000000000000000";
+    too_big(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "g",
+            "--n",
+            huge,
+            "--reference",
+            "1",
+        ],
+        &format!("the train set's {huge} signals x 162 vertices x 1 channel: needs"),
+        "g",
+    );
+    let pairs = |shapes: &str, poses: &str| {
+        [
+            "dataset",
+            "pairs",
+            "--mesh",
+            "builtin:capsule",
+            "--out",
+            "p",
+            "--shapes",
+            shapes,
+            "--poses",
+            poses,
+            "--reference",
+            "1",
+            "--handles",
+            "2",
+            "--radius",
+            "0.15",
+            "--regions",
+            "3",
+            "--coarse-faces",
+            "300",
+        ]
+        .map(str::to_owned)
+    };
+    let a = pairs(huge, "2");
+    too_big(
+        d,
+        &run_args(&a),
+        "the train set's 200000000000000000 signals",
+        "p",
+    );
+    let a = pairs("2", "10000000000000000");
+    too_big(
+        d,
+        &run_args(&a),
+        "the train set's 20000000000000000 signals",
+        "p",
+    );
+    too_big(
+        d,
+        &[
+            "dataset",
+            "deform",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "f",
+            "--n",
+            huge,
+            "--handles",
+            "2",
+            "--coarse-faces",
+            "320",
+        ],
+        "the train set's",
+        "f",
+    );
+    too_big(
+        d,
+        &[
+            "spectrum",
+            "builtin:icosphere:2",
+            "--samples",
+            "1000000000000000000",
+            "--out",
+            "sp.json",
+        ],
+        "--samples 1000000000000000000 x 3 kept coefficients (--coefficients)",
+        "sp.json",
+    );
+}
+
+/// Borrowed arguments of owned ones (any feature set).
+fn run_args(a: &[String]) -> Vec<&str> {
+    a.iter().map(String::as_str).collect()
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn networks_beyond_the_machine_are_refused_up_front() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:1",
+            "--out",
+            "data",
+            "--n",
+            "2",
+            "--reference",
+            "0",
+        ],
+    );
+    fs::write(
+        d.join("wide.toml"),
+        TINY.replace("width = 8", "width = 100000"),
+    )
+    .unwrap();
+    let e = refused(
+        d,
+        &[
+            "train",
+            "--config",
+            "wide.toml",
+            "--dataset",
+            "data/train",
+            "--out",
+            "run",
+            "--quiet",
+        ],
+        "a network of width 100000 with 1 blocks",
+    );
+    assert!(
+        e.contains("lower model.width or model.blocks") && !e.contains("panicked"),
+        "{e}"
+    );
+    assert!(!d.join("run").exists());
 }

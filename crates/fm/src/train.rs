@@ -722,6 +722,8 @@ impl Trainer {
         }
         let device = config.train.device.resolve()?;
         let net_config = config.model.net_config(flow.channels)?;
+        // weights, gradients, two Adam moments and a weight average
+        net_config.ensure_fits(20)?;
         let (net, ema) = {
             let _guard = INIT_LOCK.lock().unwrap_or_else(|p| p.into_inner());
             // libtorch seeds are i64; the bits of the u64 seed are kept
