@@ -1644,3 +1644,111 @@ fn networks_beyond_the_machine_are_refused_up_front() {
     );
     assert!(!d.join("run").exists());
 }
+
+#[test]
+fn one_writer_per_folder_and_stale_locks_are_taken_over() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    let gmm = |out: &str| {
+        [
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:1",
+            "--out",
+            out,
+            "--n",
+            "2",
+            "--reference",
+            "0",
+        ]
+        .map(str::to_owned)
+    };
+    // a writer of `busy` in this process: every dataset command is refused naming it
+    let held = mfm_files::FolderLock::acquire(&d.join("busy"), "the test's writer").unwrap();
+    let holder = format!(
+        "busy is in use by PID {} (the test's writer)",
+        std::process::id()
+    );
+    let pairs = [
+        "dataset",
+        "pairs",
+        "--mesh",
+        "builtin:capsule",
+        "--out",
+        "busy",
+        "--shapes",
+        "1",
+        "--poses",
+        "2",
+        "--reference",
+        "0",
+    ];
+    let deform = [
+        "dataset",
+        "deform",
+        "--mesh",
+        "builtin:icosphere:2",
+        "--out",
+        "busy",
+        "--n",
+        "1",
+        "--reference",
+        "0",
+        "--handles",
+        "2",
+    ];
+    for args in [run_args(&gmm("busy")), pairs.to_vec(), deform.to_vec()] {
+        refused(d, &args, &holder);
+        assert!(
+            !d.join("busy").exists(),
+            "{args:?} wrote into a locked folder"
+        );
+    }
+    if cfg!(feature = "network") {
+        ok(d, &run_args(&gmm("data")));
+        fs::write(
+            d.join("run.toml"),
+            "[model]\npreset = \"small\"\nwidth = 8\nblocks = 1\n\
+vector_layers = 1\n[train]\nsteps = 2\nbatch = 2\n[sample]\nsteps = 2\n",
+        )
+        .unwrap();
+        ok(
+            d,
+            &[
+                "train",
+                "--config",
+                "run.toml",
+                "--dataset",
+                "data/train",
+                "--out",
+                "run",
+                "--quiet",
+            ],
+        );
+        let sample = [
+            "sample",
+            "--run",
+            "run",
+            "--mesh",
+            "builtin:icosphere:1",
+            "--n",
+            "1",
+            "--out",
+            "busy",
+        ];
+        refused(d, &sample, &holder);
+        assert!(!d.join("busy").exists());
+        drop(held);
+        ok(d, &sample);
+    } else {
+        drop(held);
+    }
+    // a lock file left by a process that is gone is stale: taken over, and
+    // removed when the new writer ends
+    let lock = d.join(".stale.mfm-lock");
+    fs::write(&lock, "PID 999999999 (mfm dataset gmm --out stale)\n").unwrap();
+    ok(d, &run_args(&gmm("stale")));
+    assert!(d.join("stale/train/manifest.json").is_file());
+    assert!(!lock.exists(), "the lock goes with its holder");
+}
