@@ -25,6 +25,7 @@ use mfm_data::SignalSource;
 use mfm_data::dataset::Dataset;
 use mfm_data::pairs::PairsManifest;
 use mfm_geometry::TriMesh;
+use mfm_geometry::frame::SurfaceSize;
 use mfm_net::{HeadKind, PoissonNet, PoissonNetConfig, loss};
 use mfm_noise::NoiseKind;
 use rand::Rng;
@@ -168,7 +169,16 @@ pub struct ArbitrarySpec {
     pub predictor: PathBuf,
     /// Vertices of the template.
     pub vertices: usize,
+    /// The template's size and topology in its own frame (largest extent
+    /// 1), which sources are compared with; `None` in runs trained before
+    /// it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub template_surface: Option<SurfaceSize>,
 }
+
+/// Relative difference in area (in its own frame) beyond which a source is
+/// reported as unlike the template: the template's shapes vary by less.
+pub const SOURCE_AREA_TOLERANCE: f64 = 0.5;
 
 /// The conditioning `[1, V, 3 + 1 + k]` of a source at time `t`.
 fn conditioning(source: &Tensor, t: f64, eigen: &Tensor) -> Tensor {
@@ -233,6 +243,7 @@ pub fn train(
                 dataset: dataset.to_path_buf(),
                 predictor: predictor_dir.to_path_buf(),
                 vertices: template.num_vertices(),
+                template_surface: Some(SurfaceSize::of(&template).normalized()),
             },
         )?;
         mfm_fm::checkpoint::write_file_record(
@@ -375,6 +386,22 @@ impl ArbitrarySampler {
     /// `ode_steps` (at least 1).
     pub fn set_ode_steps(&mut self, steps: usize) {
         self.spec.config.ode_steps = steps.max(1);
+    }
+
+    /// Why `source` does not look like a shape of the template the run was
+    /// trained on: another Euler characteristic (genus, holes), another
+    /// number of components, or an area (both scaled to a largest extent
+    /// of one) off by more than [`SOURCE_AREA_TOLERANCE`]; empty when it
+    /// does, or for a run that did not record its template.
+    pub fn source_warnings(&self, source: &TriMesh) -> Vec<String> {
+        match &self.spec.template_surface {
+            Some(t) => t.mismatches_with(
+                &SurfaceSize::of(source).normalized(),
+                SOURCE_AREA_TOLERANCE,
+                "the template",
+            ),
+            None => Vec::new(),
+        }
     }
 
     /// The predictor the flow was trained with.

@@ -138,6 +138,9 @@ pub fn sample(a: &SampleArgs) -> Result<()> {
         .unwrap_or_default();
     let mesh = load_mesh_checked(source)?;
     let mut sampler = ArbitrarySampler::load(&a.run)?;
+    for w in sampler.source_warnings(&mesh) {
+        eprintln!("warning: {source}: {w}; the run generates poses of shapes like its template's");
+    }
     if let Some(s) = a.steps {
         if s == 0 {
             bail!("--steps must be at least 1");

@@ -877,6 +877,31 @@ fn arbitrary_runs_check_their_models_and_keep_reports() {
     refused(d, &run(&sample("t2")), "model.state.json: missing");
     fs::write(&record, kept).unwrap();
 
+    // a source unlike the template is warned about: topology and area
+    let o = ok(d, &run(&sample("t5")));
+    assert!(!err(&o).contains("warning"), "{}", err(&o));
+    fs::write(
+        d.join("tet.off"),
+        "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 1 2 3\n3 0 3 2\n",
+    )
+    .unwrap();
+    for (source, needle) in [
+        (
+            "builtin:torus",
+            "warning: builtin:torus: Euler characteristic 0 differs from the template's 2",
+        ),
+        (
+            "tet.off",
+            "warning: tet.off: area 2.366 differs from the template's",
+        ),
+    ] {
+        let mut a = sample("t6").to_vec();
+        a[4] = source.into();
+        let o = ok(d, &run(&a));
+        assert!(err(&o).contains(needle), "{source}: {}", err(&o));
+        fs::remove_dir_all(d.join("t6")).unwrap();
+    }
+
     // more targets than any machine holds: refused before sampling
     let mut a = sample("t4").to_vec();
     a[6] = "100000000000000000".into();
@@ -1751,4 +1776,56 @@ vector_layers = 1\n[train]\nsteps = 2\nbatch = 2\n[sample]\nsteps = 2\n",
     ok(d, &run_args(&gmm("stale")));
     assert!(d.join("stale/train/manifest.json").is_file());
     assert!(!lock.exists(), "the lock goes with its holder");
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn a_sampling_mesh_of_another_topology_is_warned_about() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "data",
+            "--n",
+            "2",
+            "--reference",
+            "0",
+        ],
+    );
+    fs::write(d.join("run.toml"), TINY.replace("steps = 4", "steps = 1")).unwrap();
+    ok(
+        d,
+        &[
+            "train",
+            "--config",
+            "run.toml",
+            "--dataset",
+            "data/train",
+            "--out",
+            "run",
+            "--quiet",
+        ],
+    );
+    let sample = |mesh: &str, out: &str| {
+        [
+            "sample", "--run", "run", "--mesh", mesh, "--n", "1", "--ply", "0", "--out", out,
+        ]
+        .map(str::to_owned)
+    };
+    let o = ok(d, &run(&sample("builtin:icosphere:3", "a")));
+    assert!(!err(&o).contains("warning"), "{}", err(&o));
+    let o = ok(d, &run(&sample("builtin:torus", "b")));
+    assert!(
+        err(&o).contains(
+            "warning: builtin:torus: Euler characteristic 0 differs from the training surface's 2"
+        ),
+        "{}",
+        err(&o)
+    );
 }
