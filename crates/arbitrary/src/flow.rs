@@ -174,6 +174,11 @@ pub struct ArbitrarySpec {
     /// it was recorded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub template_surface: Option<SurfaceSize>,
+    /// The template's identity ([`mfm_data::dataset::mesh_identity`]): an
+    /// experiment evaluated with the run must be of it; `None` in runs
+    /// trained before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub template: Option<String>,
 }
 
 /// Relative difference in area (in its own frame) beyond which a source is
@@ -212,6 +217,7 @@ pub fn train(
         )));
     };
     let template = data.mesh().clone();
+    let identity = mfm_data::dataset::mesh_identity(&template);
     std::fs::create_dir_all(run_dir).map_err(|e| FmError::io(run_dir, e))?;
     let spec_path = run_dir.join(ARBITRARY_SPEC);
     if spec_path.is_file() {
@@ -219,6 +225,17 @@ pub fn train(
         same_config(run_dir, &spec.config, config)?;
     } else {
         let source = EigenPredictor::load(predictor_dir)?;
+        if let Some(theirs) = &source.spec().template
+            && *theirs != identity
+        {
+            return Err(FmError::Config(format!(
+                "the predictor in {} was trained on another template (the mesh of {}, {theirs}) \
+                 than the dataset {} (its mesh: {identity}): train a predictor on this dataset",
+                predictor_dir.display(),
+                source.spec().dataset.display(),
+                dataset.display()
+            )));
+        }
         if source.spec().vertices != template.num_vertices() {
             return Err(FmError::Config(format!(
                 "the predictor in {} was trained on a template of {} vertices, the dataset's has {}",
@@ -244,6 +261,7 @@ pub fn train(
                 predictor: predictor_dir.to_path_buf(),
                 vertices: template.num_vertices(),
                 template_surface: Some(SurfaceSize::of(&template).normalized()),
+                template: Some(identity.clone()),
             },
         )?;
         mfm_fm::checkpoint::write_file_record(

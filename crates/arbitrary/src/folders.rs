@@ -431,6 +431,23 @@ pub fn evaluate_experiment(
             )),
         });
     }
+    if let Some(trained) = &sampler.spec().template
+        && sets.contains(&HOLDOUT)
+    {
+        // the held-out set is on the training connectivity: its mesh is the template
+        let set = f.experiment.join(HOLDOUT);
+        let theirs =
+            mfm_data::dataset::mesh_identity(mfm_data::dataset::Dataset::open(&set)?.mesh());
+        if theirs != *trained {
+            return Err(FmError::Config(format!(
+                "{} is an experiment of another template ({theirs}) than the run {} was trained \
+                 on (the mesh of {}, {trained}): evaluate it on its own experiment",
+                f.experiment.display(),
+                f.run.display(),
+                sampler.spec().dataset.display()
+            )));
+        }
+    }
     let mut outputs = vec![f.out.join("report.json")];
     outputs.extend(sets.iter().map(|s| f.out.join(format!("{s}.png"))));
     let undo = mfm_files::Outputs::new()

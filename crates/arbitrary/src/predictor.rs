@@ -135,6 +135,11 @@ pub struct PredictorSpec {
     pub eigenvalues: Vec<f64>,
     /// The sign rule's margins ([`Eigenbasis::margins`]).
     pub margins: Vec<f64>,
+    /// The template's identity ([`mfm_data::dataset::mesh_identity`]), which
+    /// a flow trained with this predictor must share; `None` in runs
+    /// trained before it was recorded (they compare vertex counts only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub template: Option<String>,
 }
 
 /// A source moved into its own frame (and the same map applied to
@@ -236,6 +241,7 @@ pub fn train(
             vertices: template.num_vertices(),
             eigenvalues: basis.values.clone(),
             margins: basis.margins.clone(),
+            template: Some(mfm_data::dataset::mesh_identity(&template)),
         };
         mfm_files::npy::write(
             &targets_path,

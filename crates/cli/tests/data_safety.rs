@@ -1415,6 +1415,62 @@ fn wrong_folder_kinds_say_what_they_are() {
     );
     assert!(!d.join("ev").exists() && !d.join("x").exists());
 
+    // another template of as many vertices (one vertex moved): its predictor
+    // is refused for a flow, and a run is not evaluated on its experiment
+    ok(d, &["convert", "builtin:capsule", "capsule.ply"]);
+    let mut capsule = mfm_meshio::read_mesh(d.join("capsule.ply")).unwrap();
+    let mut moved = capsule.positions().to_vec();
+    moved[0][0] += 0.05;
+    capsule = capsule.with_positions(moved).unwrap();
+    mfm_meshio::write_ply(d.join("other.ply"), &capsule, &[]).unwrap();
+    ok(
+        d,
+        &[
+            "dataset",
+            "pairs",
+            "--mesh",
+            "other.ply",
+            "--out",
+            "other",
+            "--shapes",
+            "2",
+            "--poses",
+            "2",
+            "--reference",
+            "1",
+            "--handles",
+            "2",
+            "--radius",
+            "0.15",
+            "--regions",
+            "3",
+            "--coarse-faces",
+            "300",
+        ],
+    );
+    let args = train(&[
+        "--mode",
+        "arbitrary",
+        "--dataset",
+        "other/train",
+        "--predictor",
+        "pred",
+        "--out",
+        "x",
+    ]);
+    let e = refused(d, &run(&args), "was trained on another template");
+    assert!(
+        e.contains("pairs/train") && e.contains("other/train"),
+        "{e}"
+    );
+    let e = refused(
+        d,
+        &run(&eval("arb", "other")),
+        "other is an experiment of another template",
+    );
+    assert!(e.contains("pairs/train"), "{e}");
+    assert!(!d.join("ev").exists() && !d.join("x").exists());
+
     // a template with fewer vertices than the predictor's eigenvectors names the flags
     ok(
         d,
