@@ -1885,3 +1885,115 @@ fn a_sampling_mesh_of_another_topology_is_warned_about() {
         err(&o)
     );
 }
+
+/// Starts `mfm args` in `dir`, waits (up to two minutes) until `ready`
+/// holds, sends `signal` and returns the exit output.
+fn interrupt_when(
+    dir: &Path,
+    args: &[&str],
+    ready: impl Fn() -> bool,
+    signal: &str,
+) -> std::process::Output {
+    let child = Command::new(env!("CARGO_BIN_EXE_mfm"))
+        .current_dir(dir)
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    while !ready() {
+        assert!(t0.elapsed().as_secs() < 120, "{args:?} did not get going");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let status = Command::new("kill")
+        .args([signal, &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    child.wait_with_output().unwrap()
+}
+
+#[test]
+fn interrupted_commands_remove_what_they_wrote_and_exit_130() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    fs::write(d.join("mine.txt"), "the user's").unwrap();
+    // SIGTERM while noise streams its .npy: the temporary goes
+    let o = interrupt_when(
+        d,
+        &[
+            "noise",
+            "builtin:icosphere:5",
+            "--samples",
+            "3000",
+            "--out",
+            "big.npy",
+        ],
+        || !tmp_files(d).is_empty(),
+        "-TERM",
+    );
+    assert_eq!(o.status.code(), Some(130), "{}", err(&o));
+    assert!(err(&o).contains("interrupted; removed what this command had written"));
+    assert!(tmp_files(d).is_empty(), "{:?}", tmp_files(d));
+    assert!(!d.join("big.npy").exists() && !d.join("big.json").exists());
+    // SIGHUP while a pairs experiment is half written: the folder goes whole
+    let o = interrupt_when(
+        d,
+        &[
+            "dataset",
+            "pairs",
+            "--mesh",
+            "builtin:capsule",
+            "--out",
+            "pairs",
+            "--shapes",
+            "400",
+            "--poses",
+            "4",
+            "--reference",
+            "1",
+            "--handles",
+            "2",
+            "--radius",
+            "0.15",
+            "--regions",
+            "3",
+            "--coarse-faces",
+            "300",
+        ],
+        || d.join("pairs/pair_space.json").exists(),
+        "-HUP",
+    );
+    assert_eq!(o.status.code(), Some(130), "{}", err(&o));
+    assert!(
+        !d.join("pairs").exists(),
+        "a half-written experiment was left"
+    );
+    assert!(!d.join(".pairs.mfm-lock").exists(), "the lock was left");
+    // SIGINT (Ctrl-C) while a GMM dataset is generated
+    let o = interrupt_when(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:4",
+            "--out",
+            "gmm",
+            "--n",
+            "200000",
+            "--reference",
+            "0",
+        ],
+        || d.join("gmm").exists(),
+        "-INT",
+    );
+    assert_eq!(o.status.code(), Some(130), "{}", err(&o));
+    assert!(!d.join("gmm").exists());
+    let left: Vec<_> = fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(left, vec![std::ffi::OsString::from("mine.txt")], "{left:?}");
+}

@@ -32,6 +32,8 @@ use std::path::{Path, PathBuf};
 pub struct FolderLock {
     path: PathBuf,
     _file: File,
+    /// Its entry in [`crate::interrupt`].
+    id: u64,
 }
 
 impl FolderLock {
@@ -83,7 +85,12 @@ impl FolderLock {
                 .and_then(|()| writeln!(file, "PID {} ({command})", std::process::id()))
                 .and_then(|()| file.sync_all())
                 .map_err(|e| FileError::io(&path, e))?;
-            return Ok(Self { path, _file: file });
+            let id = crate::interrupt::register(crate::interrupt::Pending::File(path.clone()));
+            return Ok(Self {
+                path,
+                _file: file,
+                id,
+            });
         }
     }
 
@@ -95,6 +102,7 @@ impl FolderLock {
 
 impl Drop for FolderLock {
     fn drop(&mut self) {
+        crate::interrupt::forget(self.id);
         // removed while still locked: a waiting writer that opened it finds
         // it gone and takes a fresh one
         let _ = fs::remove_file(&self.path);
