@@ -1982,7 +1982,7 @@ fn interrupted_commands_remove_what_they_wrote_and_exit_130() {
             "--out",
             "gmm",
             "--n",
-            "200000",
+            "20000",
             "--reference",
             "0",
         ],
@@ -1996,4 +1996,52 @@ fn interrupted_commands_remove_what_they_wrote_and_exit_130() {
         .map(|e| e.unwrap().file_name())
         .collect();
     assert_eq!(left, vec![std::ffi::OsString::from("mine.txt")], "{left:?}");
+
+    // SIGKILL cannot be handled: the next writer of the same names removes
+    // what the killed one left (its PID is gone), and a rerun is not refused
+    let noise = [
+        "noise",
+        "builtin:icosphere:5",
+        "--samples",
+        "3000",
+        "--out",
+        "big.npy",
+    ];
+    let o = interrupt_when(d, &noise, || !tmp_files(d).is_empty(), "-KILL");
+    assert_eq!(o.status.code(), None);
+    assert_eq!(tmp_files(d).len(), 1, "{:?}", tmp_files(d));
+    ok(d, &["noise", "builtin:icosphere:1", "--out", "big.npy"]);
+    assert!(tmp_files(d).is_empty(), "{:?}", tmp_files(d));
+    let gmm = [
+        "dataset",
+        "gmm",
+        "--mesh",
+        "builtin:icosphere:4",
+        "--out",
+        "gmm",
+        "--n",
+        "20000",
+        "--reference",
+        "0",
+    ];
+    let in_progress = || {
+        fs::read_dir(d.join("gmm")).is_ok_and(|mut l| {
+            l.any(|e| {
+                e.unwrap()
+                    .file_name()
+                    .to_string_lossy()
+                    .starts_with(".train.tmp-")
+            })
+        })
+    };
+    let o = interrupt_when(d, &gmm, in_progress, "-KILL");
+    assert_eq!(o.status.code(), None);
+    let mut rerun = gmm;
+    rerun[7] = "2";
+    ok(d, &rerun);
+    let inside: Vec<_> = fs::read_dir(d.join("gmm"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(!inside.iter().any(|n| n.starts_with('.')), "{inside:?}");
 }

@@ -72,6 +72,8 @@ impl AtomicFile {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),
         };
+        // what a killed earlier writer of this file left
+        crate::interrupt::remove_stale_temporaries(&dir, name.to_str());
         static COUNTER: AtomicU64 = AtomicU64::new(0);
         let (tmp, file) = loop {
             let mut tmp_name = std::ffi::OsString::from(".");

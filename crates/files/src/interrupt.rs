@@ -7,7 +7,8 @@
 //! and lock files are removed and every open [`crate::Undo`] is undone
 //! (newest first), exactly as if the command had failed. A process killed
 //! with SIGKILL cannot clean up; its temporaries carry its PID in their
-//! names.
+//! names, and the next command that writes there removes them
+//! ([`remove_stale_temporaries`]).
 
 use std::path::PathBuf;
 use std::sync::Mutex;
@@ -65,4 +66,85 @@ pub fn clean_up() -> usize {
         }
     }
     all.len()
+}
+
+/// The PID in the name of an mfm temporary of `name` (or of any name when
+/// `name` is `None`): a file `.NAME.PID.N.tmp` ([`crate::AtomicFile`]) or a
+/// folder `.NAME.tmp-PID-N` / `.NAME.old-PID-N` (a dataset being written or
+/// replaced).
+fn temporary_pid(entry: &str, name: Option<&str>) -> Option<u32> {
+    let inner = entry.strip_prefix('.')?;
+    let (stem, pid) = if let Some(rest) = inner.strip_suffix(".tmp") {
+        let mut parts = rest.rsplitn(3, '.');
+        let (n, pid, stem) = (parts.next()?, parts.next()?, parts.next()?);
+        n.parse::<u64>().ok()?;
+        (stem, pid)
+    } else {
+        let (stem, tail) = inner.rsplit_once('.')?;
+        let rest = tail
+            .strip_prefix("tmp-")
+            .or_else(|| tail.strip_prefix("old-"))?;
+        let (pid, n) = rest.split_once('-')?;
+        n.parse::<u64>().ok()?;
+        (stem, pid)
+    };
+    if name.is_some_and(|want| want != stem) {
+        return None;
+    }
+    pid.parse().ok()
+}
+
+/// Removes from the folder `dir` the temporaries of `name` (of any name when
+/// `None`) that an mfm process killed outright left there: those whose PID
+/// is no longer a running process (see [`temporary_pid`] for the names).
+/// Temporaries of a live process, this one included, are left alone.
+/// Returns how many were removed.
+///
+/// Cost: one listing of `dir`.
+pub fn remove_stale_temporaries(dir: &std::path::Path, name: Option<&str>) -> usize {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    let mut removed = 0;
+    for e in entries.flatten() {
+        let file_name = e.file_name();
+        let Some(pid) = file_name.to_str().and_then(|n| temporary_pid(n, name)) else {
+            continue;
+        };
+        if pid == std::process::id() || crate::lock::process_alive(pid) {
+            continue;
+        }
+        let path = e.path();
+        let gone = match e.file_type() {
+            Ok(t) if t.is_dir() => std::fs::remove_dir_all(&path),
+            _ => std::fs::remove_file(&path),
+        };
+        if gone.is_ok() {
+            removed += 1;
+        }
+    }
+    removed
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn temporary_names_give_their_pid() {
+        use super::temporary_pid as pid;
+        assert_eq!(pid(".big.npy.123.0.tmp", None), Some(123));
+        assert_eq!(pid(".big.npy.123.0.tmp", Some("big.npy")), Some(123));
+        assert_eq!(pid(".big.npy.123.0.tmp", Some("other.npy")), None);
+        assert_eq!(pid(".train.tmp-77-0", None), Some(77));
+        assert_eq!(pid(".train.old-77-3", Some("train")), Some(77));
+        for not_ours in [
+            "big.npy",
+            ".hidden",
+            ".x.tmp",
+            ".a.b.tmp",
+            ".train.tmp-x-0",
+            ".t.new-1-2",
+        ] {
+            assert_eq!(pid(not_ours, None), None, "{not_ours}");
+        }
+    }
 }

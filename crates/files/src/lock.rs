@@ -166,8 +166,9 @@ fn try_flock(_: &File) -> io::Result<bool> {
     Err(io::Error::other("no flock on this platform"))
 }
 
+/// Whether a process `pid` is running (or exists under another user).
 #[cfg(unix)]
-fn process_alive(pid: u32) -> bool {
+pub(crate) fn process_alive(pid: u32) -> bool {
     let Ok(pid) = libc::pid_t::try_from(pid) else {
         return false;
     };
@@ -176,8 +177,9 @@ fn process_alive(pid: u32) -> bool {
     rc == 0 || io::Error::last_os_error().raw_os_error() == Some(libc::EPERM)
 }
 
+/// Whether a process `pid` is running: always assumed here.
 #[cfg(not(unix))]
-fn process_alive(_: u32) -> bool {
+pub(crate) fn process_alive(_: u32) -> bool {
     true
 }
 
