@@ -158,6 +158,18 @@ pub fn evaluate_set(
     let rest = data.mesh().clone();
     let meshes = data.load_all()?;
     let shapes = (meshes.len() / p).min(sources.max(1));
+    // the generated targets of every source are kept (f32), each source's
+    // as f64 while it is measured
+    mfm_files::space::ensure_memory(
+        &format!(
+            "{shapes} sources x {per_source} targets x {} vertices x 3 coordinates",
+            rest.num_vertices()
+        ),
+        (shapes as u128)
+            .saturating_mul(per_source as u128)
+            .saturating_mul(rest.num_vertices() as u128 * 3),
+        12,
+    )?;
     let mass = mfm_geometry::operators::lumped_mass(&rest);
     let metric = MassWeighted::new(&mass, 3)?;
     let k = sampler.predictor().eigenvectors();

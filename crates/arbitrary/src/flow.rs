@@ -25,6 +25,7 @@ use mfm_data::SignalSource;
 use mfm_data::dataset::Dataset;
 use mfm_data::pairs::PairsManifest;
 use mfm_geometry::TriMesh;
+use mfm_geometry::frame::SurfaceSize;
 use mfm_net::{HeadKind, PoissonNet, PoissonNetConfig, loss};
 use mfm_noise::NoiseKind;
 use rand::Rng;
@@ -168,7 +169,21 @@ pub struct ArbitrarySpec {
     pub predictor: PathBuf,
     /// Vertices of the template.
     pub vertices: usize,
+    /// The template's size and topology in its own frame (largest extent
+    /// 1), which sources are compared with; `None` in runs trained before
+    /// it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub template_surface: Option<SurfaceSize>,
+    /// The template's identity ([`mfm_data::dataset::mesh_identity`]): an
+    /// experiment evaluated with the run must be of it; `None` in runs
+    /// trained before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub template: Option<String>,
 }
+
+/// Relative difference in area (in its own frame) beyond which a source is
+/// reported as unlike the template: the template's shapes vary by less.
+pub const SOURCE_AREA_TOLERANCE: f64 = 0.5;
 
 /// The conditioning `[1, V, 3 + 1 + k]` of a source at time `t`.
 fn conditioning(source: &Tensor, t: f64, eigen: &Tensor) -> Tensor {
@@ -202,6 +217,7 @@ pub fn train(
         )));
     };
     let template = data.mesh().clone();
+    let identity = mfm_data::dataset::mesh_identity(&template);
     std::fs::create_dir_all(run_dir).map_err(|e| FmError::io(run_dir, e))?;
     let spec_path = run_dir.join(ARBITRARY_SPEC);
     if spec_path.is_file() {
@@ -209,6 +225,17 @@ pub fn train(
         same_config(run_dir, &spec.config, config)?;
     } else {
         let source = EigenPredictor::load(predictor_dir)?;
+        if let Some(theirs) = &source.spec().template
+            && *theirs != identity
+        {
+            return Err(FmError::Config(format!(
+                "the predictor in {} was trained on another template (the mesh of {}, {theirs}) \
+                 than the dataset {} (its mesh: {identity}): train a predictor on this dataset",
+                predictor_dir.display(),
+                source.spec().dataset.display(),
+                dataset.display()
+            )));
+        }
         if source.spec().vertices != template.num_vertices() {
             return Err(FmError::Config(format!(
                 "the predictor in {} was trained on a template of {} vertices, the dataset's has {}",
@@ -233,6 +260,8 @@ pub fn train(
                 dataset: dataset.to_path_buf(),
                 predictor: predictor_dir.to_path_buf(),
                 vertices: template.num_vertices(),
+                template_surface: Some(SurfaceSize::of(&template).normalized()),
+                template: Some(identity.clone()),
             },
         )?;
         mfm_fm::checkpoint::write_file_record(
@@ -256,7 +285,13 @@ pub fn train(
     let (batch, sigma) = (schedule.batch, config.sigma as f32);
     let device = Device::Cpu;
     let mut eigen_cache: HashMap<usize, Tensor> = HashMap::new();
-    let mut opt = Optimization::start_or_resume(run_dir, &config.net_config(k), schedule, device)?;
+    let mut opt = Optimization::start_or_resume(
+        run_dir,
+        ARBITRARY_SPEC,
+        &config.net_config(k),
+        schedule,
+        device,
+    )?;
     opt.run(stop, progress, "arbitrary-source flow", |net, step| {
         let mut rng = derived_rng(schedule.seed, PURPOSE_ITEMS, step);
         let mut total = 0.0;
@@ -334,6 +369,14 @@ impl ArbitrarySampler {
     /// # Errors
     /// Missing or unreadable files, named; an unfinished run.
     pub fn load(run_dir: &Path) -> Result<Self> {
+        let kind = crate::folders::FolderKind::of(run_dir);
+        if kind != crate::folders::FolderKind::ArbitraryRun {
+            return Err(FmError::RunFolder(format!(
+                "{}: {}, not an arbitrary-source run (mfm train --mode arbitrary)",
+                run_dir.display(),
+                kind.is()
+            )));
+        }
         let spec: ArbitrarySpec = read_json(
             &run_dir.join(ARBITRARY_SPEC),
             "an arbitrary-source run's description",
@@ -361,6 +404,22 @@ impl ArbitrarySampler {
     /// `ode_steps` (at least 1).
     pub fn set_ode_steps(&mut self, steps: usize) {
         self.spec.config.ode_steps = steps.max(1);
+    }
+
+    /// Why `source` does not look like a shape of the template the run was
+    /// trained on: another Euler characteristic (genus, holes), another
+    /// number of components, or an area (both scaled to a largest extent
+    /// of one) off by more than [`SOURCE_AREA_TOLERANCE`]; empty when it
+    /// does, or for a run that did not record its template.
+    pub fn source_warnings(&self, source: &TriMesh) -> Vec<String> {
+        match &self.spec.template_surface {
+            Some(t) => t.mismatches_with(
+                &SurfaceSize::of(source).normalized(),
+                SOURCE_AREA_TOLERANCE,
+                "the template",
+            ),
+            None => Vec::new(),
+        }
     }
 
     /// The predictor the flow was trained with.

@@ -42,6 +42,100 @@ impl RunKind {
     }
 }
 
+/// What an mfm folder holds, as its marker files show: for messages that
+/// say what a folder given to a flag is and what the flag expects.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FolderKind {
+    /// Nothing at the path.
+    Missing,
+    /// A file, not a folder.
+    File,
+    /// A flow run of `mfm train` (`config.toml` or `flow.json`).
+    FlowRun,
+    /// An eigenvector predictor run (`mfm train --mode predictor`:
+    /// [`PREDICTOR_SPEC`] without [`ARBITRARY_SPEC`]).
+    PredictorRun,
+    /// An arbitrary-source run (`mfm train --mode arbitrary`:
+    /// [`ARBITRARY_SPEC`]).
+    ArbitraryRun,
+    /// A dataset (`manifest.json`), e.g. one set of an experiment.
+    Dataset,
+    /// An experiment of `mfm dataset gmm|deform|pairs` (a `train/`,
+    /// `reference/` or `holdout/` set, or a deformation or pair space).
+    Experiment,
+    /// A folder with none of these.
+    Other,
+}
+
+impl FolderKind {
+    /// The kind of `dir`. Cost: a few `stat` calls.
+    pub fn of(dir: &Path) -> Self {
+        use mfm_data::dataset::MANIFEST_FILE;
+        use mfm_data::layout::{PAIR_SPACE, SPACE, TRAIN};
+        use mfm_fm::checkpoint::{CONFIG_FILE, FLOW_FILE};
+        if !dir.exists() {
+            return Self::Missing;
+        }
+        if !dir.is_dir() {
+            return Self::File;
+        }
+        let has = |rel: &str| dir.join(rel).exists();
+        if has(ARBITRARY_SPEC) {
+            Self::ArbitraryRun
+        } else if has(PREDICTOR_SPEC) {
+            Self::PredictorRun
+        } else if has(CONFIG_FILE) || has(FLOW_FILE) {
+            Self::FlowRun
+        } else if has(MANIFEST_FILE) {
+            Self::Dataset
+        } else if [TRAIN, REFERENCE, HOLDOUT]
+            .iter()
+            .any(|set| has(&format!("{set}/{MANIFEST_FILE}")))
+            || has(SPACE)
+            || has(PAIR_SPACE)
+        {
+            Self::Experiment
+        } else {
+            Self::Other
+        }
+    }
+
+    /// What the folder is, for a message: "an eigenvector predictor run
+    /// (mfm train --mode predictor)".
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Missing => "nothing (no such folder)",
+            Self::File => "a file, not a folder",
+            Self::FlowRun => "a flow run (mfm train)",
+            Self::PredictorRun => "an eigenvector predictor run (mfm train --mode predictor)",
+            Self::ArbitraryRun => "an arbitrary-source run (mfm train --mode arbitrary)",
+            Self::Dataset => "a dataset folder",
+            Self::Experiment => "an experiment folder (mfm dataset gmm|deform|pairs)",
+            Self::Other => "not a folder mfm wrote",
+        }
+    }
+
+    /// The kind as a predicate, for a message: "is a dataset folder", or
+    /// "does not exist".
+    pub fn is(self) -> String {
+        match self {
+            Self::Missing => "does not exist".to_owned(),
+            other => format!("is {}", other.describe()),
+        }
+    }
+
+    /// The `mfm train` flags that continue a run of this kind, for a run
+    /// kind.
+    pub fn resume_flags(self) -> Option<&'static str> {
+        match self {
+            Self::FlowRun => Some("--resume"),
+            Self::PredictorRun => Some("--resume --mode predictor"),
+            Self::ArbitraryRun => Some("--resume --mode arbitrary"),
+            _ => None,
+        }
+    }
+}
+
 /// What a fresh run is made of.
 #[derive(Clone, Debug)]
 pub struct FreshRun {
@@ -224,10 +318,20 @@ pub fn write_sample_folder(
         .inputs(f.source_file)
         .outputs(&outputs)
         .prepare()?;
+    let v = source.num_vertices();
+    // every target is held as f64 positions and written as f32
+    mfm_files::space::ensure_memory(
+        &format!("{n} targets x {v} vertices x 3 coordinates"),
+        (n as u128) * (v as u128) * 3,
+        12,
+    )?;
+    mfm_files::space::ensure_space(
+        &outputs[0],
+        mfm_files::npy::file_bytes(&[n as u64, v as u64, 3], 4),
+    )?;
     let t0 = std::time::Instant::now();
     let shapes = sampler.sample(source, 0, n, f.seed)?;
     let seconds = t0.elapsed().as_secs_f64();
-    let v = source.num_vertices();
     let flat: Vec<f32> = shapes
         .iter()
         .flat_map(|s| s.iter().flat_map(|p| p.map(|x| x as f32)))
@@ -309,10 +413,40 @@ pub fn evaluate_experiment(
         .filter(|s| f.experiment.join(s).join("manifest.json").is_file())
         .collect();
     if sets.is_empty() {
-        return Err(FmError::Config(format!(
-            "{} has no {HOLDOUT} or {REFERENCE} set (write one with mfm dataset pairs --reference N)",
-            f.experiment.display()
-        )));
+        let e = f.experiment.display();
+        return Err(match FolderKind::of(f.experiment) {
+            FolderKind::Missing => FmError::RunFolder(format!(
+                "{e}: no such folder (expected the experiment folder of mfm dataset pairs)"
+            )),
+            FolderKind::Experiment => FmError::Config(format!(
+                "{e} has no {HOLDOUT} or {REFERENCE} set (write one with mfm dataset pairs --reference N)"
+            )),
+            FolderKind::Dataset => FmError::RunFolder(format!(
+                "{e}: is a dataset folder (one set of an experiment), not an experiment folder: \
+                 give the folder of mfm dataset pairs that holds {HOLDOUT}/ and {REFERENCE}/"
+            )),
+            other => FmError::RunFolder(format!(
+                "{e}: {}, not an experiment folder (the --out folder of mfm dataset pairs)",
+                other.is()
+            )),
+        });
+    }
+    if let Some(trained) = &sampler.spec().template
+        && sets.contains(&HOLDOUT)
+    {
+        // the held-out set is on the training connectivity: its mesh is the template
+        let set = f.experiment.join(HOLDOUT);
+        let theirs =
+            mfm_data::dataset::mesh_identity(mfm_data::dataset::Dataset::open(&set)?.mesh());
+        if theirs != *trained {
+            return Err(FmError::Config(format!(
+                "{} is an experiment of another template ({theirs}) than the run {} was trained \
+                 on (the mesh of {}, {trained}): evaluate it on its own experiment",
+                f.experiment.display(),
+                f.run.display(),
+                sampler.spec().dataset.display()
+            )));
+        }
     }
     let mut outputs = vec![f.out.join("report.json")];
     outputs.extend(sets.iter().map(|s| f.out.join(format!("{s}.png"))));

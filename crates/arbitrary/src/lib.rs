@@ -45,7 +45,7 @@ use serde::{Deserialize, Serialize};
 use mfm_fm::checkpoint::WEIGHTS_FILE;
 use mfm_fm::{FmError, Result};
 
-pub use run::TrainReport;
+pub use run::{RESUMABLE_SPEC_FIELDS, TrainReport};
 
 /// The optimization settings shared by both trainings.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

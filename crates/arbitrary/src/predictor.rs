@@ -135,6 +135,11 @@ pub struct PredictorSpec {
     pub eigenvalues: Vec<f64>,
     /// The sign rule's margins ([`Eigenbasis::margins`]).
     pub margins: Vec<f64>,
+    /// The template's identity ([`mfm_data::dataset::mesh_identity`]), which
+    /// a flow trained with this predictor must share; `None` in runs
+    /// trained before it was recorded (they compare vertex counts only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub template: Option<String>,
 }
 
 /// A source moved into its own frame (and the same map applied to
@@ -204,6 +209,16 @@ pub fn train(
         )));
     }
     let template = data.mesh().clone();
+    if template.num_vertices() < config.eigenvectors {
+        return Err(FmError::Config(format!(
+            "{}: the template has {} vertices, fewer than the {} eigenvectors the predictor \
+             learns: make the dataset from a finer mesh (mfm dataset pairs --mesh, refined with \
+             mfm remesh --subdivide 1, or a larger --coarse-faces)",
+            dataset.display(),
+            template.num_vertices(),
+            config.eigenvectors
+        )));
+    }
     std::fs::create_dir_all(run_dir).map_err(|e| FmError::io(run_dir, e))?;
     let spec_path = run_dir.join(PREDICTOR_SPEC);
     let targets_path = run_dir.join(TARGETS_FILE);
@@ -226,6 +241,7 @@ pub fn train(
             vertices: template.num_vertices(),
             eigenvalues: basis.values.clone(),
             margins: basis.margins.clone(),
+            template: Some(mfm_data::dataset::mesh_identity(&template)),
         };
         mfm_files::npy::write(
             &targets_path,
@@ -245,7 +261,13 @@ pub fn train(
     let sources = SourceSet::new(&template, NoiseKind::Naive)?;
     let schedule = &config.schedule;
     let batch = schedule.batch;
-    let mut opt = Optimization::start_or_resume(run_dir, &config.net_config(), schedule, device)?;
+    let mut opt = Optimization::start_or_resume(
+        run_dir,
+        PREDICTOR_SPEC,
+        &config.net_config(),
+        schedule,
+        device,
+    )?;
     let n = meshes.len();
     opt.run(stop, progress, "predictor", |net, step| {
         let mut rng = derived_rng(schedule.seed, PURPOSE_ITEMS, step);
@@ -285,6 +307,14 @@ impl EigenPredictor {
     /// # Errors
     /// Missing or unreadable files, named.
     pub fn load(run_dir: &Path) -> Result<Self> {
+        let kind = crate::folders::FolderKind::of(run_dir);
+        if kind != crate::folders::FolderKind::PredictorRun {
+            return Err(FmError::RunFolder(format!(
+                "{}: {}, not an eigenvector predictor run (mfm train --mode predictor)",
+                run_dir.display(),
+                kind.is()
+            )));
+        }
         let spec: PredictorSpec = read_json(
             &run_dir.join(PREDICTOR_SPEC),
             "a predictor run's description",

@@ -69,6 +69,87 @@ impl TrainReport {
     }
 }
 
+/// Fields of a run's description (`predictor.json`, `arbitrary.json`) that
+/// may change when it is resumed: how long it runs, how often it
+/// checkpoints, and where its data now lives. Every other field shapes the
+/// model or the optimisation.
+pub const RESUMABLE_SPEC_FIELDS: &[&str] = &[
+    "config.schedule.steps",
+    "config.schedule.checkpoint_every",
+    "dataset",
+];
+
+/// The scalar fields of a JSON value by dotted path (arrays whole).
+fn flatten(prefix: &str, v: &serde_json::Value, out: &mut BTreeMap<String, String>) {
+    match v {
+        serde_json::Value::Object(map) => {
+            for (k, x) in map {
+                let key = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}.{k}")
+                };
+                flatten(&key, x, out);
+            }
+        }
+        other => {
+            out.insert(prefix.to_owned(), other.to_string());
+        }
+    }
+}
+
+/// Refuses to resume `run_dir` from the checkpoint `checkpoint` (of
+/// `step`) when its `spec_file` was edited since in a field outside
+/// [`RESUMABLE_SPEC_FIELDS`], naming each change, or when its steps fall
+/// below the checkpoint's. A checkpoint without a copy (written before
+/// checkpoints kept one) is not checked.
+fn refuse_spec_edits(run_dir: &Path, checkpoint: &Path, spec_file: &str, step: u64) -> Result<()> {
+    let saved = checkpoint.join(spec_file);
+    if !saved.is_file() {
+        return Ok(());
+    }
+    let now = run_dir.join(spec_file);
+    let read = |path: &Path| -> Result<BTreeMap<String, String>> {
+        let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
+        let v: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| FmError::format(path, format!("not readable as JSON: {e}")))?;
+        let mut out = BTreeMap::new();
+        flatten("", &v, &mut out);
+        Ok(out)
+    };
+    let (before, after) = (read(&saved)?, read(&now)?);
+    let keys: std::collections::BTreeSet<&String> = before.keys().chain(after.keys()).collect();
+    let refused: Vec<String> = keys
+        .into_iter()
+        .filter(|k| before.get(*k) != after.get(*k))
+        .filter(|k| !RESUMABLE_SPEC_FIELDS.contains(&k.as_str()))
+        .map(|k| {
+            let show =
+                |m: &BTreeMap<String, String>| m.get(k).cloned().unwrap_or_else(|| "-".into());
+            format!("{k} {} -> {}", show(&before), show(&after))
+        })
+        .collect();
+    if !refused.is_empty() {
+        return Err(FmError::Config(format!(
+            "{} was edited after the checkpoint at step {step}: {}; a resumed run cannot change \
+             these (only {} can): undo the edit, or start a new run",
+            now.display(),
+            refused.join(", "),
+            RESUMABLE_SPEC_FIELDS.join(", ")
+        )));
+    }
+    let steps = after
+        .get("config.schedule.steps")
+        .and_then(|s| s.parse::<u64>().ok());
+    if let Some(total) = steps.filter(|&t| t < step) {
+        return Err(FmError::Config(format!(
+            "{}: config.schedule.steps = {total} is below the checkpoint's step {step}",
+            now.display()
+        )));
+    }
+    Ok(())
+}
+
 /// A network with its optimizer in a run folder.
 #[derive(Debug)]
 pub(crate) struct Optimization {
@@ -76,6 +157,7 @@ pub(crate) struct Optimization {
     adam: Adam,
     schedule: Schedule,
     run_dir: PathBuf,
+    spec_file: &'static str,
     step: u64,
     elapsed: f64,
     last_loss: Option<f64>,
@@ -85,8 +167,13 @@ pub(crate) struct Optimization {
 impl Optimization {
     /// A fresh network (initial weights from the schedule's seed), or the
     /// state of the newest valid checkpoint of `run_dir` when there is one.
+    /// `spec_file` names the run's description (`predictor.json`,
+    /// `arbitrary.json`): every checkpoint keeps a copy, and resuming
+    /// refuses edits made to it since the checkpoint other than
+    /// [`RESUMABLE_SPEC_FIELDS`].
     pub(crate) fn start_or_resume(
         run_dir: &Path,
+        spec_file: &'static str,
         net: &PoissonNetConfig,
         schedule: &Schedule,
         device: Device,
@@ -113,6 +200,7 @@ impl Optimization {
         let log = run_dir.join(LOG_FILE);
         let (step, elapsed, last_loss) = match newest {
             Some((info, state)) => {
+                refuse_spec_edits(run_dir, &info.dir, spec_file, state.step)?;
                 network.load_weights(info.dir.join(WEIGHTS_FILE))?;
                 adam.load(&info.dir.join(OPTIMIZER_FILE), state.step)?;
                 truncate_log(&log, state.step)?;
@@ -129,6 +217,7 @@ impl Optimization {
             adam,
             schedule: schedule.clone(),
             run_dir: run_dir.to_path_buf(),
+            spec_file,
             step,
             elapsed,
             last_loss,
@@ -148,9 +237,12 @@ impl Optimization {
             files: BTreeMap::new(),
         };
         let (net, adam) = (&self.net, &self.adam);
+        let spec = self.run_dir.join(self.spec_file);
         checkpoint::write_checkpoint(&self.run_dir, state, |tmp| {
             net.save(tmp.join(WEIGHTS_FILE))?;
-            adam.save(&tmp.join(OPTIMIZER_FILE))
+            adam.save(&tmp.join(OPTIMIZER_FILE))?;
+            let bytes = std::fs::read(&spec).map_err(|e| FmError::io(&spec, e))?;
+            checkpoint::write_atomic(&tmp.join(self.spec_file), &bytes)
         })?;
         checkpoint::prune_checkpoints(&self.run_dir, KEEP)?;
         Ok(())
@@ -199,7 +291,9 @@ impl Optimization {
             }
             self.adam.zero_grad();
             let s = self.step;
-            let loss = step_fn(&self.net, s)?;
+            let loss = step_fn(&self.net, s).map_err(|e| {
+                mfm_fm::train::divergence(&self.net, s, what, "the learning rate", e)
+            })?;
             if !loss.is_finite() {
                 return Err(FmError::Diverged(format!(
                     "{what} diverged at step {s}: the loss is {loss}; lower the learning rate \

@@ -7,7 +7,7 @@ use crate::mesh::{load_mesh_checked, mesh_path};
 use anyhow::{Context, Result, bail};
 use mfm_arbitrary::flow::{ARBITRARY_SPEC, ArbitrarySampler};
 use mfm_arbitrary::folders::{
-    EvalFolder, FreshRun, RunKind, SampleFolder, TrainingRun, evaluate_experiment,
+    EvalFolder, FolderKind, FreshRun, RunKind, SampleFolder, TrainingRun, evaluate_experiment,
     write_sample_folder,
 };
 use mfm_fm::config::{DeviceChoice, OdeMethod};
@@ -46,10 +46,25 @@ pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<bool> {
             );
         }
         if !a.out.join(spec_file).is_file() {
-            bail!(
-                "--out {}: no {spec_file} there (--resume continues a run this mode started)",
-                a.out.display()
-            );
+            let found = FolderKind::of(&a.out);
+            let wanted = match kind {
+                RunKind::Predictor => FolderKind::PredictorRun,
+                RunKind::Flow => FolderKind::ArbitraryRun,
+            };
+            match found.resume_flags() {
+                Some(flags) => bail!(
+                    "--out {}: {}, not {}: continue it with {flags}",
+                    a.out.display(),
+                    found.is(),
+                    wanted.describe()
+                ),
+                None => bail!(
+                    "--out {}: {}, with no {spec_file} (--resume continues {})",
+                    a.out.display(),
+                    found.is(),
+                    wanted.describe()
+                ),
+            }
         }
         None
     } else {
@@ -63,7 +78,19 @@ pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<bool> {
             seed: a.seed,
             dataset: need(&a.dataset, "--dataset")?,
             predictor: match kind {
-                RunKind::Flow => Some(need(&a.predictor, "--predictor")?),
+                RunKind::Flow => {
+                    let p = need(&a.predictor, "--predictor")?;
+                    let found = FolderKind::of(&p);
+                    if found != FolderKind::PredictorRun {
+                        bail!(
+                            "--predictor {}: {}; --predictor takes a finished eigenvector \
+                             predictor run (the --out folder of mfm train --mode predictor)",
+                            p.display(),
+                            found.is()
+                        );
+                    }
+                    Some(p)
+                }
                 RunKind::Predictor => None,
             },
             eigenvectors: !a.no_eigenvectors,
@@ -111,6 +138,9 @@ pub fn sample(a: &SampleArgs) -> Result<()> {
         .unwrap_or_default();
     let mesh = load_mesh_checked(source)?;
     let mut sampler = ArbitrarySampler::load(&a.run)?;
+    for w in sampler.source_warnings(&mesh) {
+        eprintln!("warning: {source}: {w}; the run generates poses of shapes like its template's");
+    }
     if let Some(s) = a.steps {
         if s == 0 {
             bail!("--steps must be at least 1");

@@ -86,6 +86,9 @@ pub enum Command {
 
 /// Runs one subcommand.
 pub fn run(cmd: Command) -> Result<()> {
+    if !matches!(cmd, Command::Train(_)) {
+        crate::output::clean_up_on_interrupt();
+    }
     match cmd {
         Command::Info(a) => a.run(),
         Command::Operators(a) => a.run(),

@@ -327,12 +327,13 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
             (m.train, m.test, "builtin:blob".to_owned())
         }
         (Some(spec), None) => {
-            let m = GmmMeshes::from_base(load_mesh_checked(spec)?, Default::default())?;
+            let base = with_areas(load_mesh_checked(spec)?, "--mesh", spec)?;
+            let m = GmmMeshes::from_base(base, Default::default())?;
             (m.train, m.test, spec.clone())
         }
         (Some(spec), Some(test)) => (
-            load_mesh_checked(spec)?,
-            load_mesh_checked(test)?,
+            with_areas(load_mesh_checked(spec)?, "--mesh", spec)?,
+            with_areas(load_mesh_checked(test)?, "--test-mesh", test)?,
             spec.clone(),
         ),
         (None, Some(_)) => bail!("--test-mesh needs --mesh (the training mesh)"),
@@ -367,4 +368,25 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
         t0.elapsed().as_secs_f64()
     );
     Ok(())
+}
+
+/// `mesh` (given to `flag` as `spec`) when every face has an area: the
+/// GMM bumps' geodesic distances need one; else the error naming the file
+/// and its first degenerate face.
+fn with_areas(
+    mesh: mfm_geometry::TriMesh,
+    flag: &str,
+    spec: &str,
+) -> Result<mfm_geometry::TriMesh> {
+    let bad = mfm_geometry::operators::degenerate_faces(&mesh);
+    if let Some(first) = bad.first() {
+        bail!(
+            "{flag} {spec}: {} degenerate face{} (zero area), e.g. face {first}: the GMM bumps' \
+             geodesic distances need every face to have an area (`mfm info {spec}` lists the \
+             mesh's problems)",
+            bad.len(),
+            if bad.len() == 1 { "" } else { "s" }
+        );
+    }
+    Ok(mesh)
 }

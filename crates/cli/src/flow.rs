@@ -178,6 +178,17 @@ pub fn train(a: TrainArgs) -> Result<()> {
                 a.out.display()
             );
         }
+        use mfm_arbitrary::folders::FolderKind;
+        let found = FolderKind::of(&a.out);
+        if let (FolderKind::PredictorRun | FolderKind::ArbitraryRun, Some(flags)) =
+            (found, found.resume_flags())
+        {
+            bail!(
+                "--out {}: {}, not a flow run: continue it with {flags}",
+                a.out.display(),
+                found.is()
+            );
+        }
         let run = RunFolder::resume(&a.out, a.dataset.as_deref(), a.device, a.steps)?;
         if let Some(p) = &run.moved_from {
             eprintln!(

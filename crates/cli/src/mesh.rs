@@ -157,6 +157,21 @@ impl RenderArgs {
                         a.shape
                     );
                 }
+                let bad = a.values.iter().filter(|v| !v.is_finite()).count();
+                if bad == a.values.len() {
+                    bail!(
+                        "{}: all {bad} values are non-finite (NaN or inf): nothing to colour by",
+                        path.display()
+                    );
+                }
+                if bad > 0 {
+                    eprintln!(
+                        "warning: {}: {bad} of {} values are non-finite (NaN or inf); \
+                         those vertices are drawn grey and the colour bar spans the finite ones",
+                        path.display(),
+                        a.values.len()
+                    );
+                }
                 Some(a.values)
             }
             (None, None) => None,

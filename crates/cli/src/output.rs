@@ -25,3 +25,20 @@ pub fn lock_folder(dir: &Path) -> Result<mfm_files::FolderLock> {
     let command: Vec<String> = std::env::args().collect();
     Ok(mfm_files::FolderLock::acquire(dir, &command.join(" "))?)
 }
+
+/// Installs the handler of SIGINT, SIGTERM and SIGHUP of every command but
+/// `train` (which checkpoints instead): it removes what the command had
+/// created, temporaries, half-filled folders and its lock included
+/// ([`mfm_files::interrupt::clean_up`]), and exits with status 130.
+pub fn clean_up_on_interrupt() {
+    let installed = ctrlc::set_handler(|| {
+        mfm_files::interrupt::clean_up();
+        eprintln!("\nmfm: interrupted; removed what this command had written");
+        std::process::exit(130);
+    });
+    if let Err(e) = installed {
+        eprintln!(
+            "mfm: warning: cannot install the interrupt handler ({e}); an interrupt may leave temporary files"
+        );
+    }
+}

@@ -252,6 +252,18 @@ impl SpectrumArgs {
         if args.samples < 2 || args.k == 0 {
             bail!("--samples must be at least 2 and --k at least 1");
         }
+        // the coefficients of the plotted frequencies are kept for every sample
+        let kept = (args.coefficients.len() * args.meshes.len()) as u128;
+        mfm_files::space::ensure_memory(
+            &format!(
+                "--samples {} x {} kept coefficients (--coefficients) x {} mesh(es) of f64",
+                args.samples,
+                args.coefficients.len(),
+                args.meshes.len()
+            ),
+            (args.samples as u128) * kept,
+            8,
+        )?;
         let mut outputs = vec![args.out.to_path_buf()];
         if let Some(dir) = args.plots.as_deref() {
             outputs.push(dir.join("variance.png"));

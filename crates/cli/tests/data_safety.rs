@@ -877,6 +877,59 @@ fn arbitrary_runs_check_their_models_and_keep_reports() {
     refused(d, &run(&sample("t2")), "model.state.json: missing");
     fs::write(&record, kept).unwrap();
 
+    // a source unlike the template is warned about: topology and area
+    let o = ok(d, &run(&sample("t5")));
+    assert!(!err(&o).contains("warning"), "{}", err(&o));
+    fs::write(
+        d.join("tet.off"),
+        "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 1 2 3\n3 0 3 2\n",
+    )
+    .unwrap();
+    for (source, needle) in [
+        (
+            "builtin:torus",
+            "warning: builtin:torus: Euler characteristic 0 differs from the template's 2",
+        ),
+        (
+            "tet.off",
+            "warning: tet.off: area 2.366 differs from the template's",
+        ),
+    ] {
+        let mut a = sample("t6").to_vec();
+        a[4] = source.into();
+        let o = ok(d, &run(&a));
+        assert!(err(&o).contains(needle), "{source}: {}", err(&o));
+        fs::remove_dir_all(d.join("t6")).unwrap();
+    }
+
+    // more targets than any machine holds: refused before sampling
+    let mut a = sample("t4").to_vec();
+    a[6] = "100000000000000000".into();
+    too_big(
+        d,
+        &run(&a),
+        "100000000000000000 targets x 722 vertices x 3 coordinates: needs",
+        "t4",
+    );
+    too_big(
+        d,
+        &[
+            "eval-arbitrary",
+            "--run",
+            "arb",
+            "--experiment",
+            "data",
+            "--sources",
+            "1",
+            "--per-source",
+            "100000000000000000",
+            "--out",
+            "ev4",
+        ],
+        "1 sources x 100000000000000000 targets",
+        "ev4",
+    );
+
     // a predictor run is not sampled; the message says what to do instead
     refused(
         d,
@@ -952,6 +1005,45 @@ fn arbitrary_runs_check_their_models_and_keep_reports() {
     ]);
     ok(d, &run(&args));
 
+    // an edited run description: a model or optimisation change is refused
+    // by name and kept, a longer run accepted
+    for (spec, mode, model_dir) in [
+        ("pred/predictor.json", "predictor", "pred"),
+        ("arb/arbitrary.json", "arbitrary", "arb"),
+    ] {
+        let original = fs::read_to_string(d.join(spec)).unwrap();
+        assert!(original.contains("\"lr\": 0.001,"), "{original}");
+        let edited = original.replace("\"lr\": 0.001,", "\"lr\": 1000000.0,");
+        fs::write(d.join(spec), &edited).unwrap();
+        let resume = [
+            "train", "--resume", "--mode", mode, "--out", model_dir, "--quiet",
+        ];
+        let e = refused(
+            d,
+            &resume,
+            &format!(
+                "{spec} was edited after the checkpoint at step 2: config.schedule.lr 0.001 -> 1000000.0"
+            ),
+        );
+        assert!(e.contains("undo the edit"), "{e}");
+        assert_eq!(
+            fs::read_to_string(d.join(spec)).unwrap(),
+            edited,
+            "the edit is kept"
+        );
+        fs::write(
+            d.join(spec),
+            original.replace("\"steps\": 2,", "\"steps\": 3,"),
+        )
+        .unwrap();
+        let o = ok(d, &resume);
+        assert!(
+            String::from_utf8_lossy(&o.stdout).contains("steps 2..3 of 3"),
+            "{}",
+            String::from_utf8_lossy(&o.stdout)
+        );
+    }
+
     // a finished run without its checkpoints is not retrained over its model
     let model = fs::read(d.join("arb/model.safetensors")).unwrap();
     fs::remove_dir_all(d.join("arb/checkpoints")).unwrap();
@@ -969,4 +1061,987 @@ fn arbitrary_runs_check_their_models_and_keep_reports() {
         "no valid checkpoint",
     );
     assert_eq!(fs::read(d.join("arb/model.safetensors")).unwrap(), model);
+}
+
+/// Writes `values` as a 1-D little-endian `f64` `.npy` file.
+fn write_npy(path: &Path, values: &[f64]) {
+    write_npy_shaped(path, &[values.len()], values);
+}
+
+/// Writes `values` as a little-endian `f64` `.npy` file of `shape`.
+fn write_npy_shaped(path: &Path, shape: &[usize], values: &[f64]) {
+    let dims: String = shape.iter().map(|n| format!("{n},")).collect();
+    let dict = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': ({dims}), }}");
+    // magic (6) + version (2) + header length (2) + dict + newline: a multiple of 64
+    let pad = (64 - (10 + dict.len() + 1) % 64) % 64;
+    let header = format!("{dict}{}\n", " ".repeat(pad));
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&u16::try_from(header.len()).unwrap().to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    for v in values {
+        bytes.extend_from_slice(&v.to_le_bytes());
+    }
+    fs::write(path, bytes).unwrap();
+}
+
+#[test]
+fn render_says_when_scalars_are_not_finite() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    // builtin:icosphere:1 has 42 vertices
+    write_npy(&d.join("nan.npy"), &[f64::NAN; 42]);
+    let mut mixed: Vec<f64> = (0..42).map(f64::from).collect();
+    mixed[3] = f64::NAN;
+    mixed[7] = f64::INFINITY;
+    write_npy(&d.join("mixed.npy"), &mixed);
+    fn render<'a>(scalars: &'a str, out: &'a str) -> [&'a str; 8] {
+        [
+            "render",
+            "builtin:icosphere:1",
+            "--scalars",
+            scalars,
+            "--size",
+            "64",
+            "--out",
+            out,
+        ]
+    }
+    refused(
+        d,
+        &render("nan.npy", "nan.png"),
+        "nan.npy: all 42 values are non-finite (NaN or inf)",
+    );
+    assert!(!d.join("nan.png").exists());
+    let o = ok(d, &render("mixed.npy", "mixed.png"));
+    assert!(
+        err(&o).contains("warning: mixed.npy: 2 of 42 values are non-finite"),
+        "{}",
+        err(&o)
+    );
+    assert!(d.join("mixed.png").is_file());
+    let o = ok(d, &render("mixed.npy", "again.png"));
+    assert_eq!(err(&o).matches("warning").count(), 1, "{}", err(&o));
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn training_divergence_names_the_step_and_the_rate() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "data",
+            "--n",
+            "4",
+            "--reference",
+            "2",
+        ],
+    );
+    fs::write(
+        d.join("lr.toml"),
+        TINY.replace("log_every = 1\n", "log_every = 1\nlr = 1e6\n"),
+    )
+    .unwrap();
+    let e = refused(
+        d,
+        &[
+            "train",
+            "--config",
+            "lr.toml",
+            "--dataset",
+            "data/train",
+            "--out",
+            "run",
+            "--quiet",
+        ],
+        "training diverged at step 1",
+    );
+    assert!(e.contains("lower train.lr"), "{e}");
+    assert!(
+        !d.join("run").exists(),
+        "no run folder without a checkpoint"
+    );
+}
+
+#[test]
+fn errors_name_the_file_and_the_flag() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    // a degenerate (zero-area) face in --test-mesh names the flag and the file
+    // (vertex 3 on the edge 1-2: face 2 has no area)
+    let off = "OFF\n4 4 0\n0 0 1\n1 0 0\n0 1 0\n0.5 0.5 0\n3 0 2 1\n3 0 1 3\n3 1 2 3\n3 2 0 3\n";
+    fs::write(d.join("flat.off"), off).unwrap();
+    let e = refused(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--test-mesh",
+            "flat.off",
+            "--out",
+            "g",
+            "--n",
+            "2",
+            "--reference",
+            "1",
+        ],
+        "--test-mesh flat.off: 1 degenerate face (zero area), e.g. face 2",
+    );
+    assert!(!e.contains("geodesics"), "{e}");
+    assert!(!d.join("g").exists());
+    // an empty samples file names the file
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:1",
+            "--out",
+            "data",
+            "--n",
+            "2",
+            "--reference",
+            "2",
+        ],
+    );
+    write_npy_shaped(&d.join("none.npy"), &[0, 42, 1], &[]);
+    refused(
+        d,
+        &[
+            "eval",
+            "--samples",
+            "none.npy",
+            "--reference",
+            "data/reference",
+        ],
+        "none.npy: holds no samples (shape [0, 42, 1])",
+    );
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn wrong_folder_kinds_say_what_they_are() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    // a flow run, and a pairs experiment with a predictor and an arbitrary run
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "gmm",
+            "--n",
+            "4",
+            "--reference",
+            "0",
+        ],
+    );
+    fs::write(d.join("run.toml"), TINY).unwrap();
+    ok(
+        d,
+        &[
+            "train",
+            "--config",
+            "run.toml",
+            "--dataset",
+            "gmm/train",
+            "--out",
+            "flow",
+            "--quiet",
+        ],
+    );
+    ok(
+        d,
+        &[
+            "dataset",
+            "pairs",
+            "--mesh",
+            "builtin:capsule",
+            "--out",
+            "pairs",
+            "--shapes",
+            "2",
+            "--poses",
+            "2",
+            "--reference",
+            "1",
+            "--handles",
+            "2",
+            "--radius",
+            "0.15",
+            "--regions",
+            "3",
+            "--coarse-faces",
+            "300",
+        ],
+    );
+    let train = |extra: &[&str]| {
+        let mut a = vec!["train", "--steps", "2", "--quiet"];
+        a.extend_from_slice(extra);
+        a.into_iter().map(str::to_owned).collect::<Vec<_>>()
+    };
+    let pred = train(&[
+        "--mode",
+        "predictor",
+        "--dataset",
+        "pairs/train",
+        "--out",
+        "pred",
+    ]);
+    ok(d, &run(&pred));
+    let arb = train(&[
+        "--mode",
+        "arbitrary",
+        "--dataset",
+        "pairs/train",
+        "--predictor",
+        "pred",
+        "--out",
+        "arb",
+    ]);
+    ok(d, &run(&arb));
+
+    // --predictor: a flow run, an arbitrary run, nothing
+    for (given, what) in [
+        ("flow", "is a flow run (mfm train)"),
+        (
+            "arb",
+            "is an arbitrary-source run (mfm train --mode arbitrary)",
+        ),
+        ("nowhere", "does not exist"),
+    ] {
+        let args = train(&[
+            "--mode",
+            "arbitrary",
+            "--dataset",
+            "pairs/train",
+            "--predictor",
+            given,
+            "--out",
+            "x",
+        ]);
+        let e = refused(d, &run(&args), &format!("--predictor {given}: {what}"));
+        assert!(e.contains("mfm train --mode predictor"), "{e}");
+    }
+    // --resume with the wrong --mode, or without one
+    refused(
+        d,
+        &["train", "--resume", "--out", "pred", "--quiet"],
+        "--out pred: is an eigenvector predictor run (mfm train --mode predictor), not a flow \
+         run: continue it with --resume --mode predictor",
+    );
+    refused(
+        d,
+        &["train", "--resume", "--out", "arb", "--quiet"],
+        "continue it with --resume --mode arbitrary",
+    );
+    refused(
+        d,
+        &[
+            "train",
+            "--resume",
+            "--mode",
+            "predictor",
+            "--out",
+            "flow",
+            "--quiet",
+        ],
+        "--out flow: is a flow run (mfm train), not an eigenvector predictor run",
+    );
+    // --dataset an experiment folder: its sets are named
+    for mode in ["predictor", "flow"] {
+        let args = train(&[
+            "--mode",
+            mode,
+            "--preset",
+            "cpu",
+            "--dataset",
+            "pairs",
+            "--out",
+            "x",
+        ]);
+        let e = refused(
+            d,
+            &run(&args),
+            "this is an experiment folder, not a dataset folder",
+        );
+        assert!(e.contains("pairs/train"), "{e}");
+    }
+    // eval-arbitrary: a missing experiment, a set for an experiment, runs of other kinds
+    let eval = |run_dir: &str, experiment: &str| {
+        [
+            "eval-arbitrary",
+            "--run",
+            run_dir,
+            "--experiment",
+            experiment,
+            "--out",
+            "ev",
+        ]
+        .map(str::to_owned)
+    };
+    refused(
+        d,
+        &run(&eval("arb", "nowhere")),
+        "nowhere: no such folder (expected the experiment folder of mfm dataset pairs)",
+    );
+    refused(
+        d,
+        &run(&eval("arb", "pairs/train")),
+        "pairs/train: is a dataset folder (one set of an experiment), not an experiment folder",
+    );
+    refused(
+        d,
+        &run(&eval("pred", "pairs")),
+        "pred: is an eigenvector predictor run (mfm train --mode predictor), not an \
+         arbitrary-source run",
+    );
+    refused(
+        d,
+        &run(&eval("flow", "pairs")),
+        "flow: is a flow run (mfm train), not an arbitrary-source run",
+    );
+    assert!(!d.join("ev").exists() && !d.join("x").exists());
+
+    // another template of as many vertices (one vertex moved): its predictor
+    // is refused for a flow, and a run is not evaluated on its experiment
+    ok(d, &["convert", "builtin:capsule", "capsule.ply"]);
+    let mut capsule = mfm_meshio::read_mesh(d.join("capsule.ply")).unwrap();
+    let mut moved = capsule.positions().to_vec();
+    moved[0][0] += 0.05;
+    capsule = capsule.with_positions(moved).unwrap();
+    mfm_meshio::write_ply(d.join("other.ply"), &capsule, &[]).unwrap();
+    ok(
+        d,
+        &[
+            "dataset",
+            "pairs",
+            "--mesh",
+            "other.ply",
+            "--out",
+            "other",
+            "--shapes",
+            "2",
+            "--poses",
+            "2",
+            "--reference",
+            "1",
+            "--handles",
+            "2",
+            "--radius",
+            "0.15",
+            "--regions",
+            "3",
+            "--coarse-faces",
+            "300",
+        ],
+    );
+    let args = train(&[
+        "--mode",
+        "arbitrary",
+        "--dataset",
+        "other/train",
+        "--predictor",
+        "pred",
+        "--out",
+        "x",
+    ]);
+    let e = refused(d, &run(&args), "was trained on another template");
+    assert!(
+        e.contains("pairs/train") && e.contains("other/train"),
+        "{e}"
+    );
+    let e = refused(
+        d,
+        &run(&eval("arb", "other")),
+        "other is an experiment of another template",
+    );
+    assert!(e.contains("pairs/train"), "{e}");
+    assert!(!d.join("ev").exists() && !d.join("x").exists());
+
+    // a template with fewer vertices than the predictor's eigenvectors names the flags
+    ok(
+        d,
+        &[
+            "dataset",
+            "pairs",
+            "--mesh",
+            "builtin:icosphere:1",
+            "--out",
+            "p42",
+            "--shapes",
+            "2",
+            "--poses",
+            "2",
+            "--reference",
+            "1",
+            "--handles",
+            "2",
+            "--regions",
+            "3",
+        ],
+    );
+    let args = train(&[
+        "--mode",
+        "predictor",
+        "--dataset",
+        "p42/train",
+        "--out",
+        "x",
+    ]);
+    let e = refused(
+        d,
+        &run(&args),
+        "the template has 42 vertices, fewer than the 64 eigenvectors the predictor learns",
+    );
+    assert!(e.contains("--coarse-faces") && e.contains("--mesh"), "{e}");
+
+    // a TOML error on one line, without the parser's drawing
+    fs::write(d.join("bad.toml"), "[model]\nwidth = \"x\"\n").unwrap();
+    let e = refused(
+        d,
+        &[
+            "train",
+            "--config",
+            "bad.toml",
+            "--dataset",
+            "gmm/train",
+            "--out",
+            "x",
+        ],
+        "bad.toml: invalid run configuration: line 2, column 9: invalid type: string \"x\", \
+         expected usize (`width = \"x\"`)",
+    );
+    assert!(!e.contains("\\n") && e.lines().count() == 1, "{e}");
+
+    // resuming on a dataset of other channels names both
+    ok(
+        d,
+        &[
+            "dataset",
+            "deform",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "shapes",
+            "--n",
+            "3",
+            "--reference",
+            "0",
+            "--handles",
+            "2",
+            "--coarse-faces",
+            "320",
+        ],
+    );
+    let e = refused(
+        d,
+        &[
+            "train",
+            "--resume",
+            "--out",
+            "flow",
+            "--steps",
+            "6",
+            "--dataset",
+            "shapes/train",
+            "--quiet",
+        ],
+        "the dataset shapes/train has 3-channel signals, but the run flow was trained on \
+         1-channel ones",
+    );
+    assert!(e.contains("gmm/train"), "{e}");
+    assert!(!d.join("x").exists());
+}
+
+/// Runs and expects a refusal naming the memory it needs, with no panic or
+/// backtrace and nothing written at `out`.
+#[track_caller]
+fn too_big(dir: &Path, args: &[&str], needle: &str, out: &str) {
+    let e = refused(dir, args, needle);
+    assert!(e.contains("of memory, but this machine has"), "{e}");
+    assert!(
+        !e.contains("panicked") && !e.contains("backtrace") && e.lines().count() <= 4,
+        "{e}"
+    );
+    assert!(!dir.join(out).exists(), "{out} was left behind");
+}
+
+#[test]
+fn sizes_beyond_the_machine_are_refused_up_front() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    // beyond any machine's memory and address space (isize::MAX bytes)
+    let huge = "100000000000000000";
+    too_big(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "g",
+            "--n",
+            huge,
+            "--reference",
+            "1",
+        ],
+        &format!("the train set's {huge} signals x 162 vertices x 1 channel: needs"),
+        "g",
+    );
+    let pairs = |shapes: &str, poses: &str| {
+        [
+            "dataset",
+            "pairs",
+            "--mesh",
+            "builtin:capsule",
+            "--out",
+            "p",
+            "--shapes",
+            shapes,
+            "--poses",
+            poses,
+            "--reference",
+            "1",
+            "--handles",
+            "2",
+            "--radius",
+            "0.15",
+            "--regions",
+            "3",
+            "--coarse-faces",
+            "300",
+        ]
+        .map(str::to_owned)
+    };
+    let a = pairs(huge, "2");
+    too_big(
+        d,
+        &run_args(&a),
+        "the train set's 200000000000000000 signals",
+        "p",
+    );
+    let a = pairs("2", "10000000000000000");
+    too_big(
+        d,
+        &run_args(&a),
+        "the train set's 20000000000000000 signals",
+        "p",
+    );
+    too_big(
+        d,
+        &[
+            "dataset",
+            "deform",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "f",
+            "--n",
+            huge,
+            "--handles",
+            "2",
+            "--coarse-faces",
+            "320",
+        ],
+        "the train set's",
+        "f",
+    );
+    too_big(
+        d,
+        &[
+            "spectrum",
+            "builtin:icosphere:2",
+            "--samples",
+            "1000000000000000000",
+            "--out",
+            "sp.json",
+        ],
+        "--samples 1000000000000000000 x 3 kept coefficients (--coefficients)",
+        "sp.json",
+    );
+}
+
+/// Borrowed arguments of owned ones (any feature set).
+fn run_args(a: &[String]) -> Vec<&str> {
+    a.iter().map(String::as_str).collect()
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn networks_beyond_the_machine_are_refused_up_front() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:1",
+            "--out",
+            "data",
+            "--n",
+            "2",
+            "--reference",
+            "0",
+        ],
+    );
+    fs::write(
+        d.join("wide.toml"),
+        TINY.replace("width = 8", "width = 100000"),
+    )
+    .unwrap();
+    let e = refused(
+        d,
+        &[
+            "train",
+            "--config",
+            "wide.toml",
+            "--dataset",
+            "data/train",
+            "--out",
+            "run",
+            "--quiet",
+        ],
+        "a network of width 100000 with 1 blocks",
+    );
+    assert!(
+        e.contains("lower model.width or model.blocks") && !e.contains("panicked"),
+        "{e}"
+    );
+    assert!(!d.join("run").exists());
+}
+
+#[test]
+fn one_writer_per_folder_and_stale_locks_are_taken_over() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    let gmm = |out: &str| {
+        [
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:1",
+            "--out",
+            out,
+            "--n",
+            "2",
+            "--reference",
+            "0",
+        ]
+        .map(str::to_owned)
+    };
+    // a writer of `busy` in this process: every dataset command is refused naming it
+    let held = mfm_files::FolderLock::acquire(&d.join("busy"), "the test's writer").unwrap();
+    let holder = format!(
+        "busy is in use by PID {} (the test's writer)",
+        std::process::id()
+    );
+    let pairs = [
+        "dataset",
+        "pairs",
+        "--mesh",
+        "builtin:capsule",
+        "--out",
+        "busy",
+        "--shapes",
+        "1",
+        "--poses",
+        "2",
+        "--reference",
+        "0",
+    ];
+    let deform = [
+        "dataset",
+        "deform",
+        "--mesh",
+        "builtin:icosphere:2",
+        "--out",
+        "busy",
+        "--n",
+        "1",
+        "--reference",
+        "0",
+        "--handles",
+        "2",
+    ];
+    for args in [run_args(&gmm("busy")), pairs.to_vec(), deform.to_vec()] {
+        refused(d, &args, &holder);
+        assert!(
+            !d.join("busy").exists(),
+            "{args:?} wrote into a locked folder"
+        );
+    }
+    if cfg!(feature = "network") {
+        ok(d, &run_args(&gmm("data")));
+        fs::write(
+            d.join("run.toml"),
+            "[model]\npreset = \"small\"\nwidth = 8\nblocks = 1\n\
+vector_layers = 1\n[train]\nsteps = 2\nbatch = 2\n[sample]\nsteps = 2\n",
+        )
+        .unwrap();
+        ok(
+            d,
+            &[
+                "train",
+                "--config",
+                "run.toml",
+                "--dataset",
+                "data/train",
+                "--out",
+                "run",
+                "--quiet",
+            ],
+        );
+        let sample = [
+            "sample",
+            "--run",
+            "run",
+            "--mesh",
+            "builtin:icosphere:1",
+            "--n",
+            "1",
+            "--out",
+            "busy",
+        ];
+        refused(d, &sample, &holder);
+        assert!(!d.join("busy").exists());
+        drop(held);
+        ok(d, &sample);
+    } else {
+        drop(held);
+    }
+    // a lock file left by a process that is gone is stale: taken over, and
+    // removed when the new writer ends
+    let lock = d.join(".stale.mfm-lock");
+    fs::write(&lock, "PID 999999999 (mfm dataset gmm --out stale)\n").unwrap();
+    ok(d, &run_args(&gmm("stale")));
+    assert!(d.join("stale/train/manifest.json").is_file());
+    assert!(!lock.exists(), "the lock goes with its holder");
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn a_sampling_mesh_of_another_topology_is_warned_about() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:2",
+            "--out",
+            "data",
+            "--n",
+            "2",
+            "--reference",
+            "0",
+        ],
+    );
+    fs::write(d.join("run.toml"), TINY.replace("steps = 4", "steps = 1")).unwrap();
+    ok(
+        d,
+        &[
+            "train",
+            "--config",
+            "run.toml",
+            "--dataset",
+            "data/train",
+            "--out",
+            "run",
+            "--quiet",
+        ],
+    );
+    let sample = |mesh: &str, out: &str| {
+        [
+            "sample", "--run", "run", "--mesh", mesh, "--n", "1", "--ply", "0", "--out", out,
+        ]
+        .map(str::to_owned)
+    };
+    let o = ok(d, &run(&sample("builtin:icosphere:3", "a")));
+    assert!(!err(&o).contains("warning"), "{}", err(&o));
+    let o = ok(d, &run(&sample("builtin:torus", "b")));
+    assert!(
+        err(&o).contains(
+            "warning: builtin:torus: Euler characteristic 0 differs from the training surface's 2"
+        ),
+        "{}",
+        err(&o)
+    );
+}
+
+/// Starts `mfm args` in `dir`, waits (up to two minutes) until `ready`
+/// holds, sends `signal` and returns the exit output.
+fn interrupt_when(
+    dir: &Path,
+    args: &[&str],
+    ready: impl Fn() -> bool,
+    signal: &str,
+) -> std::process::Output {
+    let child = Command::new(env!("CARGO_BIN_EXE_mfm"))
+        .current_dir(dir)
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    while !ready() {
+        assert!(t0.elapsed().as_secs() < 120, "{args:?} did not get going");
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let status = Command::new("kill")
+        .args([signal, &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    child.wait_with_output().unwrap()
+}
+
+#[test]
+fn interrupted_commands_remove_what_they_wrote_and_exit_130() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    fs::write(d.join("mine.txt"), "the user's").unwrap();
+    // SIGTERM while noise streams its .npy: the temporary goes
+    let o = interrupt_when(
+        d,
+        &[
+            "noise",
+            "builtin:icosphere:5",
+            "--samples",
+            "3000",
+            "--out",
+            "big.npy",
+        ],
+        || !tmp_files(d).is_empty(),
+        "-TERM",
+    );
+    assert_eq!(o.status.code(), Some(130), "{}", err(&o));
+    assert!(err(&o).contains("interrupted; removed what this command had written"));
+    assert!(tmp_files(d).is_empty(), "{:?}", tmp_files(d));
+    assert!(!d.join("big.npy").exists() && !d.join("big.json").exists());
+    // SIGHUP while a pairs experiment is half written: the folder goes whole
+    let o = interrupt_when(
+        d,
+        &[
+            "dataset",
+            "pairs",
+            "--mesh",
+            "builtin:capsule",
+            "--out",
+            "pairs",
+            "--shapes",
+            "400",
+            "--poses",
+            "4",
+            "--reference",
+            "1",
+            "--handles",
+            "2",
+            "--radius",
+            "0.15",
+            "--regions",
+            "3",
+            "--coarse-faces",
+            "300",
+        ],
+        || d.join("pairs/pair_space.json").exists(),
+        "-HUP",
+    );
+    assert_eq!(o.status.code(), Some(130), "{}", err(&o));
+    assert!(
+        !d.join("pairs").exists(),
+        "a half-written experiment was left"
+    );
+    assert!(!d.join(".pairs.mfm-lock").exists(), "the lock was left");
+    // SIGINT (Ctrl-C) while a GMM dataset is generated
+    let o = interrupt_when(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:4",
+            "--out",
+            "gmm",
+            "--n",
+            "20000",
+            "--reference",
+            "0",
+        ],
+        || d.join("gmm").exists(),
+        "-INT",
+    );
+    assert_eq!(o.status.code(), Some(130), "{}", err(&o));
+    assert!(!d.join("gmm").exists());
+    let left: Vec<_> = fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert_eq!(left, vec![std::ffi::OsString::from("mine.txt")], "{left:?}");
+
+    // SIGKILL cannot be handled: the next writer of the same names removes
+    // what the killed one left (its PID is gone), and a rerun is not refused
+    let noise = [
+        "noise",
+        "builtin:icosphere:5",
+        "--samples",
+        "3000",
+        "--out",
+        "big.npy",
+    ];
+    let o = interrupt_when(d, &noise, || !tmp_files(d).is_empty(), "-KILL");
+    assert_eq!(o.status.code(), None);
+    assert_eq!(tmp_files(d).len(), 1, "{:?}", tmp_files(d));
+    ok(d, &["noise", "builtin:icosphere:1", "--out", "big.npy"]);
+    assert!(tmp_files(d).is_empty(), "{:?}", tmp_files(d));
+    let gmm = [
+        "dataset",
+        "gmm",
+        "--mesh",
+        "builtin:icosphere:4",
+        "--out",
+        "gmm",
+        "--n",
+        "20000",
+        "--reference",
+        "0",
+    ];
+    let in_progress = || {
+        fs::read_dir(d.join("gmm")).is_ok_and(|mut l| {
+            l.any(|e| {
+                e.unwrap()
+                    .file_name()
+                    .to_string_lossy()
+                    .starts_with(".train.tmp-")
+            })
+        })
+    };
+    let o = interrupt_when(d, &gmm, in_progress, "-KILL");
+    assert_eq!(o.status.code(), None);
+    let mut rerun = gmm;
+    rerun[7] = "2";
+    ok(d, &rerun);
+    let inside: Vec<_> = fs::read_dir(d.join("gmm"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(!inside.iter().any(|n| n.starts_with('.')), "{inside:?}");
 }

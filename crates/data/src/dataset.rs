@@ -173,6 +173,34 @@ pub struct Dataset {
     channels: usize,
 }
 
+/// The identity of a mesh, for telling whether two folders hold the same
+/// template: `V{vertices}-F{faces}-{hash}` with a 64-bit FNV-1a hash of the
+/// positions' bits and the face indices. Two meshes with one value are, up
+/// to hash collisions, the same vertices in the same order with the same
+/// faces; another triangulation or a moved vertex gives another value.
+///
+/// Cost: `O(V + F)`.
+pub fn mesh_identity(mesh: &TriMesh) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut feed = |bytes: &[u8]| {
+        for &b in bytes {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    for p in mesh.positions() {
+        for x in p {
+            feed(&x.to_bits().to_le_bytes());
+        }
+    }
+    for f in mesh.faces() {
+        for i in f {
+            feed(&i.to_le_bytes());
+        }
+    }
+    format!("V{}-F{}-{h:016x}", mesh.num_vertices(), mesh.num_faces())
+}
+
 impl Dataset {
     /// Writes `mesh`, `signals` and `manifest` as a dataset folder `dir`
     /// (atomically; refuses a non-empty existing `dir`) and opens it.
@@ -293,6 +321,25 @@ impl Dataset {
             ));
         }
         let manifest_path = dir.join(MANIFEST_FILE);
+        if !manifest_path.exists() {
+            use crate::layout::{HOLDOUT, REFERENCE, TRAIN};
+            let sets: Vec<String> = [TRAIN, REFERENCE, HOLDOUT]
+                .iter()
+                .filter(|s| dir.join(s).join(MANIFEST_FILE).is_file())
+                .map(|s| dir.join(s).display().to_string())
+                .collect();
+            if !sets.is_empty() {
+                return Err(DataError::format(
+                    &dir,
+                    format!(
+                        "this is an experiment folder, not a dataset folder: its datasets are {} \
+                         (give one of them, e.g. {})",
+                        sets.join(", "),
+                        sets[0]
+                    ),
+                ));
+            }
+        }
         let text = std::fs::read(&manifest_path).map_err(|e| DataError::io(&manifest_path, e))?;
         let manifest: Manifest = serde_json::from_slice(&text).map_err(|e| {
             DataError::format(&manifest_path, format!("not a valid dataset manifest: {e}"))

@@ -133,6 +133,15 @@ impl GmmExperiment<'_> {
                 "a GMM experiment needs at least 1 training signal".into(),
             ));
         }
+        let mut sets = vec![(TRAIN, self.train as u128, self.train_mesh.num_vertices())];
+        if self.reference > 0 {
+            sets.push((
+                REFERENCE,
+                self.reference as u128,
+                self.test_mesh.num_vertices(),
+            ));
+        }
+        refuse_oversized(out, &sets, 1, 4)?;
         let frame = CanonicalFrame::of(self.train_mesh).map_err(|e| DataError::MeshProcessing {
             what: format!(
                 "placing the training mesh {} in the canonical frame",
@@ -212,6 +221,13 @@ impl DeformExperiment<'_> {
 
     fn write_sets(&self, out: &Path) -> Result<Dataset> {
         let m = self.meshes;
+        let (train, held) = (self.train as u128, self.reference as u128);
+        let (coarse, eval) = (m.coarse.num_vertices(), m.eval.num_vertices());
+        let mut sets = vec![(TRAIN, train, coarse)];
+        if held > 0 {
+            sets.extend([(REFERENCE, held, eval), (HOLDOUT, held, coarse)]);
+        }
+        refuse_oversized(out, &sets, 3, SHAPE_BYTES)?;
         for (file, mesh) in DEFORM_MESHES.iter().zip([&m.original, &m.coarse, &m.eval]) {
             mfm_meshio::write_ply(out.join(file), mesh, &[])?;
         }
@@ -260,6 +276,38 @@ impl DeformExperiment<'_> {
         }
         Ok(train)
     }
+}
+
+/// Bytes of memory per value of a generated shape: its `f64` position and
+/// the `f32` copy that is written.
+const SHAPE_BYTES: u128 = 12;
+
+/// Refuses an experiment too large for this machine before anything is
+/// generated or written: each of `sets` (folder, signals, vertices) of
+/// `channels` is generated in memory, `bytes_per_value` bytes a value, one
+/// set at a time, and all are written to `out` as `f32` `.npy` files.
+///
+/// # Errors
+/// [`mfm_files::FileError::NoMemory`] naming the set, or
+/// [`mfm_files::FileError::NoSpace`] for the disk.
+fn refuse_oversized(
+    out: &Path,
+    sets: &[(&str, u128, usize)],
+    channels: usize,
+    bytes_per_value: u128,
+) -> Result<()> {
+    let mut disk = 0u128;
+    for &(set, n, v) in sets {
+        let values = n.saturating_mul(v as u128).saturating_mul(channels as u128);
+        let what = format!(
+            "the {set} set's {n} signals x {v} vertices x {channels} channel{}",
+            if channels == 1 { "" } else { "s" }
+        );
+        mfm_files::space::ensure_memory(&what, values, bytes_per_value)?;
+        disk = disk.saturating_add(values.saturating_mul(4));
+    }
+    mfm_files::space::ensure_space(out, u64::try_from(disk).unwrap_or(u64::MAX))?;
+    Ok(())
 }
 
 /// Fills the experiment folder `out` (missing or empty) with `sets`, then
@@ -364,6 +412,15 @@ impl PairsExperiment<'_> {
 
     fn write_sets(&self, out: &Path) -> Result<Dataset> {
         let m = self.meshes;
+        let poses = self.space.poses_per_shape as u128;
+        let train = (self.train as u128).saturating_mul(poses);
+        let held = (self.reference as u128).saturating_mul(poses);
+        let (coarse, eval) = (m.coarse.num_vertices(), m.eval.num_vertices());
+        let mut sets = vec![(TRAIN, train, coarse)];
+        if held > 0 {
+            sets.extend([(HOLDOUT, held, coarse), (REFERENCE, held, eval)]);
+        }
+        refuse_oversized(out, &sets, 3, SHAPE_BYTES)?;
         for (file, mesh) in DEFORM_MESHES.iter().zip([&m.original, &m.coarse, &m.eval]) {
             mfm_meshio::write_ply(out.join(file), mesh, &[])?;
         }

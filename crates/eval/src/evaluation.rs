@@ -273,8 +273,8 @@ impl EvalFiles<'_> {
     /// writes the report and pictures; nothing is left behind on failure.
     ///
     /// # Errors
-    /// [`DataError::Files`] (`Format`) for non-finite samples, [`DataError::SizeMismatch`]
-    /// for samples not on the reference's mesh, and those of the readers,
+    /// [`DataError::Files`] (`Format`) for no samples or non-finite ones,
+    /// [`DataError::SizeMismatch`] for samples not on the reference's mesh, and those of the readers,
     /// [`evaluate`] and the writers.
     pub fn run(&self) -> Result<Evaluation> {
         let undo = guard(&[self.samples, self.reference], self.json, self.png)?;
@@ -402,6 +402,16 @@ fn guard(inputs: &[&Path], json: Option<&Path>, png: Option<&Path>) -> Result<mf
 /// [`InMemorySignals::read_npy`], refusing a value that is not finite.
 fn read_finite(path: &Path) -> Result<InMemorySignals> {
     let generated = InMemorySignals::read_npy(path)?;
+    if generated.is_empty() {
+        return Err(DataError::format(
+            path,
+            format!(
+                "holds no samples (shape [0, {}, {}]); metrics need at least one",
+                generated.num_vertices(),
+                generated.channels()
+            ),
+        ));
+    }
     if let Some((i, vertex, channel, x)) = generated.first_non_finite() {
         return Err(DataError::format(
             path,

@@ -45,6 +45,8 @@ pub struct AtomicFile {
     target: PathBuf,
     tmp: PathBuf,
     writer: Option<BufWriter<File>>,
+    /// Its entry in [`crate::interrupt`].
+    id: u64,
 }
 
 impl AtomicFile {
@@ -70,6 +72,8 @@ impl AtomicFile {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
             _ => PathBuf::from("."),
         };
+        // what a killed earlier writer of this file left
+        crate::interrupt::remove_stale_temporaries(&dir, name.to_str());
         static COUNTER: AtomicU64 = AtomicU64::new(0);
         let (tmp, file) = loop {
             let mut tmp_name = std::ffi::OsString::from(".");
@@ -94,11 +98,13 @@ impl AtomicFile {
             // best effort: a file system without permission bits still works
             let _ = file.set_permissions(meta.permissions());
         }
+        let id = crate::interrupt::register(crate::interrupt::Pending::File(tmp.clone()));
         Ok(Self {
             shown,
             target,
             tmp,
             writer: Some(BufWriter::new(file)),
+            id,
         })
     }
 
@@ -114,6 +120,7 @@ impl AtomicFile {
     /// [`FileError::Io`] naming the path; the temporary file is removed and
     /// the target keeps its previous contents.
     pub fn commit(mut self) -> Result<(), FileError> {
+        crate::interrupt::forget(self.id);
         let Some(writer) = self.writer.take() else {
             return Ok(());
         };
@@ -160,6 +167,7 @@ impl Write for AtomicFile {
 
 impl Drop for AtomicFile {
     fn drop(&mut self) {
+        crate::interrupt::forget(self.id);
         if self.writer.take().is_some() {
             let _ = fs::remove_file(&self.tmp);
         }

@@ -72,6 +72,20 @@ pub enum FileError {
         /// Bytes free on its file system.
         available: u64,
     },
+    /// A request needs more memory than the machine has available.
+    #[error(
+        "{what}: needs {} of memory, but this machine has {} available; ask for fewer (nothing was written)",
+        crate::space::human_bytes(*needed), crate::space::human_bytes(*available)
+    )]
+    NoMemory {
+        /// What needs the memory, in words ("1000000000 signals x 162
+        /// vertices x 1 channel of f32").
+        what: String,
+        /// Bytes needed (saturated at `u64::MAX`).
+        needed: u64,
+        /// Bytes available.
+        available: u64,
+    },
     /// An output folder exists and is not empty.
     #[error(
         "{} exists and is not empty; choose another --out (nothing was overwritten)",

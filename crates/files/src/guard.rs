@@ -130,11 +130,15 @@ impl Outputs {
 }
 
 /// Refuses a folder that exists and is not empty (a missing or empty one
-/// is fine): commands that fill a folder of their own call it first.
+/// is fine): commands that fill a folder of their own call it first. The
+/// temporaries a killed mfm process left in it are removed first
+/// ([`crate::interrupt::remove_stale_temporaries`]), so they do not make it
+/// non-empty.
 ///
 /// # Errors
 /// [`FileError::NotEmpty`].
 pub fn ensure_empty_dir(dir: &Path) -> Result<(), FileError> {
+    crate::interrupt::remove_stale_temporaries(dir, None);
     if let Ok(mut entries) = fs::read_dir(dir)
         && entries.next().is_some()
     {

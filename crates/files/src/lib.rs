@@ -30,6 +30,7 @@
 pub mod atomic;
 pub mod error;
 pub mod guard;
+pub mod interrupt;
 pub mod lock;
 pub mod matrix_market;
 pub mod npy;

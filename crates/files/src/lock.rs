@@ -32,6 +32,8 @@ use std::path::{Path, PathBuf};
 pub struct FolderLock {
     path: PathBuf,
     _file: File,
+    /// Its entry in [`crate::interrupt`].
+    id: u64,
 }
 
 impl FolderLock {
@@ -83,7 +85,12 @@ impl FolderLock {
                 .and_then(|()| writeln!(file, "PID {} ({command})", std::process::id()))
                 .and_then(|()| file.sync_all())
                 .map_err(|e| FileError::io(&path, e))?;
-            return Ok(Self { path, _file: file });
+            let id = crate::interrupt::register(crate::interrupt::Pending::File(path.clone()));
+            return Ok(Self {
+                path,
+                _file: file,
+                id,
+            });
         }
     }
 
@@ -95,6 +102,7 @@ impl FolderLock {
 
 impl Drop for FolderLock {
     fn drop(&mut self) {
+        crate::interrupt::forget(self.id);
         // removed while still locked: a waiting writer that opened it finds
         // it gone and takes a fresh one
         let _ = fs::remove_file(&self.path);
@@ -158,8 +166,9 @@ fn try_flock(_: &File) -> io::Result<bool> {
     Err(io::Error::other("no flock on this platform"))
 }
 
+/// Whether a process `pid` is running (or exists under another user).
 #[cfg(unix)]
-fn process_alive(pid: u32) -> bool {
+pub(crate) fn process_alive(pid: u32) -> bool {
     let Ok(pid) = libc::pid_t::try_from(pid) else {
         return false;
     };
@@ -168,8 +177,9 @@ fn process_alive(pid: u32) -> bool {
     rc == 0 || io::Error::last_os_error().raw_os_error() == Some(libc::EPERM)
 }
 
+/// Whether a process `pid` is running: always assumed here.
 #[cfg(not(unix))]
-fn process_alive(_: u32) -> bool {
+pub(crate) fn process_alive(_: u32) -> bool {
     true
 }
 

@@ -65,6 +65,37 @@ pub fn ensure_space(path: &Path, needed: u64) -> Result<(), FileError> {
     Ok(())
 }
 
+/// Bytes of memory the kernel says are available to a new allocation
+/// (`MemAvailable` of `/proc/meminfo`), or `None` where it cannot tell.
+pub fn available_memory() -> Option<u64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    kib.checked_mul(1024)
+}
+
+/// Refuses a request for `count` items of `bytes_each` bytes (`what`, in
+/// words, for the message) held in memory at once, when that exceeds the
+/// available memory ([`available_memory`]) or the address space, before
+/// anything is allocated. The product is taken in `u128`, so no size
+/// overflows.
+///
+/// # Errors
+/// [`FileError::NoMemory`] with both numbers.
+pub fn ensure_memory(what: &str, count: u128, bytes_each: u128) -> Result<(), FileError> {
+    let needed = count.saturating_mul(bytes_each);
+    let addressable = isize::MAX as u128;
+    let available = available_memory().map_or(addressable, |a| u128::from(a).min(addressable));
+    if needed > available {
+        return Err(FileError::NoMemory {
+            what: what.to_owned(),
+            needed: u64::try_from(needed).unwrap_or(u64::MAX),
+            available: u64::try_from(available).unwrap_or(u64::MAX),
+        });
+    }
+    Ok(())
+}
+
 /// `1.5 GB`-style sizes (powers of 1000, three significant digits).
 pub fn human_bytes(n: u64) -> String {
     const UNITS: [&str; 7] = ["B", "kB", "MB", "GB", "TB", "PB", "EB"];
@@ -83,6 +114,7 @@ pub fn human_bytes(n: u64) -> String {
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     #[test]
     fn human_sizes() {
@@ -90,5 +122,17 @@ mod tests {
         assert_eq!(super::human_bytes(1_500_000), "1.50 MB");
         assert_eq!(super::human_bytes(999_499), "999 kB");
         assert_eq!(super::human_bytes(2_654_000_000_000_000), "2.65 PB");
+    }
+
+    #[test]
+    fn memory_beyond_the_machine_is_refused() {
+        super::ensure_memory("a few bytes", 16, 8).unwrap();
+        let e = super::ensure_memory("10^15 values", 10u128.pow(15), 8).unwrap_err();
+        let text = e.to_string();
+        assert!(
+            text.starts_with("10^15 values: needs 8.00 PB of memory"),
+            "{text}"
+        );
+        assert!(text.contains("ask for fewer"), "{text}");
     }
 }

@@ -28,12 +28,27 @@ pub struct Undo {
     /// A folder that was missing or empty when taken: all in it is ours.
     owned: Option<PathBuf>,
     kept: bool,
+    /// Its entry in [`crate::interrupt`] (0 while nothing is recorded).
+    id: u64,
 }
 
 impl Undo {
     /// Nothing recorded.
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Tells [`crate::interrupt`] what an interrupt must remove now.
+    fn announce(&mut self) {
+        let what = crate::interrupt::Pending::Undo {
+            owned: self.owned.clone(),
+            created: self.created.clone(),
+        };
+        if self.id == 0 {
+            self.id = crate::interrupt::register(what);
+        } else {
+            crate::interrupt::update(self.id, what);
+        }
     }
 
     /// Creates `dir` and its missing parents, recording the outermost folder
@@ -54,6 +69,7 @@ impl Undo {
         fs::create_dir_all(dir).map_err(|e| FileError::io(dir, e))?;
         if let Some(d) = first_missing {
             self.created.push(d);
+            self.announce();
         }
         Ok(())
     }
@@ -64,6 +80,7 @@ impl Undo {
         let path = path.as_ref();
         if fs::symlink_metadata(path).is_err() {
             self.created.push(path.to_path_buf());
+            self.announce();
         }
     }
 
@@ -79,6 +96,7 @@ impl Undo {
         let mut undo = Self::new();
         undo.create_dir_all(dir)?;
         undo.owned = Some(dir.to_path_buf());
+        undo.announce();
         Ok(undo)
     }
 
@@ -90,27 +108,36 @@ impl Undo {
 
 impl Drop for Undo {
     fn drop(&mut self) {
+        if self.id != 0 {
+            crate::interrupt::forget(self.id);
+        }
         if self.kept {
             return;
         }
-        let owned = self.owned.as_deref().and_then(|d| fs::read_dir(d).ok());
-        for e in owned.into_iter().flatten().flatten() {
-            let p = e.path();
-            let _ = match e.file_type() {
-                Ok(t) if t.is_dir() => fs::remove_dir_all(&p),
-                _ => fs::remove_file(&p),
-            };
-        }
-        for p in self.created.iter().rev() {
-            match fs::symlink_metadata(p) {
-                Ok(m) if m.is_dir() => {
-                    let _ = fs::remove_dir_all(p);
-                }
-                Ok(_) => {
-                    let _ = fs::remove_file(p);
-                }
-                Err(_) => {}
+        remove(self.owned.as_deref(), &self.created);
+    }
+}
+
+/// Empties the taken folder `owned` and removes `created`, newest first:
+/// what a dropped [`Undo`] and an interrupt ([`crate::interrupt`]) do.
+pub(crate) fn remove(owned: Option<&Path>, created: &[PathBuf]) {
+    let listing = owned.and_then(|d| fs::read_dir(d).ok());
+    for e in listing.into_iter().flatten().flatten() {
+        let p = e.path();
+        let _ = match e.file_type() {
+            Ok(t) if t.is_dir() => fs::remove_dir_all(&p),
+            _ => fs::remove_file(&p),
+        };
+    }
+    for p in created.iter().rev() {
+        match fs::symlink_metadata(p) {
+            Ok(m) if m.is_dir() => {
+                let _ = fs::remove_dir_all(p);
             }
+            Ok(_) => {
+                let _ = fs::remove_file(p);
+            }
+            Err(_) => {}
         }
     }
 }

@@ -711,6 +711,8 @@ mod tests {
         new.training_surface = Some(SurfaceSize {
             extent: 2.0,
             area: 3.0,
+            euler: Some(2),
+            components: Some(1),
         });
         new.write(&path).unwrap();
         assert_eq!(FlowSpec::read(&path).unwrap(), new);

@@ -1150,8 +1150,12 @@ impl RunConfig {
     /// [`RunConfig::validate`] prefixed with `origin`.
     pub fn from_toml_str(text: &str, origin: impl AsRef<Path>) -> Result<Self> {
         let origin = origin.as_ref();
-        let cfg: Self = toml::from_str(text)
-            .map_err(|e| FmError::format(origin, format!("invalid run configuration: {e}")))?;
+        let cfg: Self = toml::from_str(text).map_err(|e| {
+            FmError::format(
+                origin,
+                format!("invalid run configuration: {}", toml_error_line(text, &e)),
+            )
+        })?;
         cfg.validate().map_err(|e| match e {
             FmError::Config(m) => FmError::format(origin, m),
             other => other,
@@ -1218,6 +1222,35 @@ pub struct ConfigChange {
 impl fmt::Display for ConfigChange {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{} {} -> {}", self.field, self.before, self.after)
+    }
+}
+
+/// A TOML parse error on one line: "line L, column C: MESSAGE (`the
+/// line's text`)" instead of the parser's multi-line drawing.
+fn toml_error_line(text: &str, e: &toml::de::Error) -> String {
+    let message = e
+        .message()
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join("; ");
+    let Some(span) = e.span() else {
+        return message;
+    };
+    let mut start = span.start.min(text.len());
+    while !text.is_char_boundary(start) {
+        start -= 1;
+    }
+    let before = &text[..start];
+    let line = before.matches('\n').count() + 1;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    let column = text[line_start..start].chars().count() + 1;
+    let shown = text[line_start..].lines().next().unwrap_or("").trim();
+    if shown.is_empty() {
+        format!("line {line}, column {column}: {message}")
+    } else {
+        format!("line {line}, column {column}: {message} (`{shown}`)")
     }
 }
 

@@ -163,6 +163,26 @@ impl RunFolder {
             (flag, _) => (dataset_dir(flag, &stored)?, None),
         };
         let (data, dataset_shape) = open(&dir)?;
+        let flow_file = out.join(checkpoint::FLOW_FILE);
+        if flow_file.is_file() {
+            let trained = checkpoint::FlowSpec::read(&flow_file)?.channels;
+            if trained != dataset_shape[2] {
+                return Err(FmError::RunFolder(format!(
+                    "the dataset {} has {}-channel signals, but the run {} was trained on \
+                     {trained}-channel ones{}: resume on a dataset like its own, or train a \
+                     new run on this one",
+                    dir.display(),
+                    dataset_shape[2],
+                    out.display(),
+                    stored
+                        .dataset
+                        .path
+                        .as_ref()
+                        .map(|p| format!(" (its dataset {})", p.display()))
+                        .unwrap_or_default()
+                )));
+            }
+        }
         let mesh = data.mesh().clone();
         let mut trainer = match device {
             Some(d) => Trainer::resume_on(out, &mesh, data, d)?,

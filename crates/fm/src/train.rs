@@ -458,6 +458,39 @@ fn with_resumable_edits(run_dir: &Path, saved: RunConfig, step: u64) -> Result<R
     Ok(edited)
 }
 
+/// The error of training step `step` that failed with `e`, read as the
+/// divergence it is: after a step with a learning rate far too large the
+/// weights are NaN or inf, or so large that the network's values overflow
+/// and a non-finite value reaches its Poisson solves. Such an error becomes
+/// [`FmError::Diverged`], "`what` diverged at step N: ...; lower `lr`",
+/// naming the weights or their largest magnitude. Any other error, and any
+/// error at step 0 (weights not yet trained), is returned unchanged.
+///
+/// Cost: one pass over the weights, on the error path only.
+pub fn divergence(net: &PoissonNet, step: u64, what: &str, lr: &str, e: FmError) -> FmError {
+    if step == 0 || !matches!(e, FmError::Net(_) | FmError::Torch(_)) {
+        return e;
+    }
+    let mut largest = 0.0f64;
+    for (name, w) in net.var_store().variables() {
+        if !bool::try_from(w.isfinite().all()).unwrap_or(false) {
+            return FmError::Diverged(format!(
+                "{what} diverged at step {step}: the weights `{name}` are NaN or inf; lower {lr} \
+                 (the last checkpoint is intact)"
+            ));
+        }
+        let m = w.abs().max().double_value(&[]);
+        largest = largest.max(m);
+    }
+    if e.to_string().contains("non-finite") {
+        return FmError::Diverged(format!(
+            "{what} diverged at step {step}: the weights grew to {largest:.2e} and the network's \
+             values overflowed ({e}); lower {lr} (the last checkpoint is intact)"
+        ));
+    }
+    e
+}
+
 /// Rewrites the log keeping the header and the rows with `step <= keep`
 /// (creates it with only the header when missing).
 pub fn truncate_log(path: &Path, keep: u64) -> Result<()> {
@@ -689,6 +722,8 @@ impl Trainer {
         }
         let device = config.train.device.resolve()?;
         let net_config = config.model.net_config(flow.channels)?;
+        // weights, gradients, two Adam moments and a weight average
+        net_config.ensure_fits(20)?;
         let (net, ema) = {
             let _guard = INIT_LOCK.lock().unwrap_or_else(|p| p.into_inner());
             // libtorch seeds are i64; the bits of the u64 seed are kept
@@ -1037,7 +1072,9 @@ impl Trainer {
                 stopped = true;
                 break;
             }
-            let stats = self.train_step()?;
+            let stats = self
+                .train_step()
+                .map_err(|e| divergence(&self.net, self.step, "training", "train.lr", e))?;
             self.step += 1;
             self.last_loss = Some(stats.loss);
             self.log.loss_sum += stats.loss;

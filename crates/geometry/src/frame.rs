@@ -115,31 +115,81 @@ impl CanonicalFrame {
     }
 }
 
-/// Size of a surface in its own units: what a sampling mesh is compared with
-/// to tell whether it is the training surface (in the same units).
+/// Size and shape class of a surface in its own units: what a sampling mesh
+/// is compared with to tell whether it is the training surface (in the same
+/// units).
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SurfaceSize {
     /// Largest bounding-box extent.
     pub extent: f64,
     /// Total area.
     pub area: f64,
+    /// Euler characteristic `V - E + F` (2 for a sphere, 0 for a torus);
+    /// `None` in sizes recorded before it was (they compare size only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub euler: Option<i64>,
+    /// Connected components of the faces; `None` as for `euler`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub components: Option<usize>,
 }
 
 impl SurfaceSize {
-    /// The size of `mesh`. `O(V + F)`.
+    /// The size of `mesh`. `O(V + F log F)` (the topology's edges).
     pub fn of(mesh: &TriMesh) -> Self {
         let (lo, hi) = mesh.bounding_box();
+        let topology = crate::Topology::new(mesh.num_vertices(), mesh.faces());
         Self {
             extent: (0..3).map(|k| hi[k] - lo[k]).fold(0.0f64, f64::max),
             area: mesh.total_area(),
+            euler: Some(topology.euler_characteristic()),
+            components: Some(topology.face_components().1),
+        }
+    }
+
+    /// The same surface scaled to a largest extent of 1 (its canonical
+    /// frame's size): for comparing shapes whatever their units.
+    pub fn normalized(&self) -> Self {
+        let e = self.extent.max(f64::MIN_POSITIVE);
+        Self {
+            extent: 1.0,
+            area: self.area / (e * e),
+            ..*self
         }
     }
 
     /// Why `other` does not look like this surface in the same units: one
     /// line per measure (extent, area) whose relative difference exceeds
-    /// `tolerance` (e.g. `0.05` for 5%), naming both values; empty when both
+    /// `tolerance` (e.g. `0.05` for 5%), naming both values, and one for
+    /// another Euler characteristic (genus, holes) or another number of
+    /// connected components when both sizes know them; empty when all
     /// agree.
     pub fn mismatches(&self, other: &SurfaceSize, tolerance: f64) -> Vec<String> {
+        self.mismatches_with(other, tolerance, "the training surface")
+    }
+
+    /// [`SurfaceSize::mismatches`] calling this surface `name` ("the
+    /// template") in the lines.
+    pub fn mismatches_with(&self, other: &SurfaceSize, tolerance: f64, name: &str) -> Vec<String> {
+        let mut out = self.size_mismatches(other, tolerance, name);
+        if let (Some(mine), Some(theirs)) = (self.euler, other.euler)
+            && mine != theirs
+        {
+            out.push(format!(
+                "Euler characteristic {theirs} differs from {name}'s {mine} \
+                 (another genus or number of holes)"
+            ));
+        }
+        if let (Some(mine), Some(theirs)) = (self.components, other.components)
+            && mine != theirs
+        {
+            out.push(format!(
+                "{theirs} connected components where {name} has {mine}"
+            ));
+        }
+        out
+    }
+
+    fn size_mismatches(&self, other: &SurfaceSize, tolerance: f64, name: &str) -> Vec<String> {
         let mut out = Vec::new();
         for (what, mine, theirs) in [
             ("largest bounding-box extent", self.extent, other.extent),
@@ -148,7 +198,7 @@ impl SurfaceSize {
             let rel = (theirs - mine).abs() / mine.abs().max(f64::MIN_POSITIVE);
             if rel.is_nan() || rel > tolerance {
                 out.push(format!(
-                    "{what} {} differs from the training surface's {} by {:.0}%",
+                    "{what} {} differs from {name}'s {} by {:.0}%",
                     short(theirs),
                     short(mine),
                     100.0 * rel
@@ -218,5 +268,32 @@ mod tests {
         assert!(w[0].contains("extent") && w[0].contains("10%"), "{w:?}");
         assert!(w[1].contains("area") && w[1].contains("21%"), "{w:?}");
         assert!(size.mismatches(&bigger, 0.25).is_empty());
+        // a torus of the sphere's size and area is still another surface
+        let torus = procedural::torus(1.0, 0.3, 48, 24).unwrap();
+        let t = SurfaceSize::of(&torus);
+        let same_size = SurfaceSize {
+            extent: size.extent,
+            area: size.area,
+            ..t
+        };
+        let w = size.mismatches(&same_size, 0.05);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].contains("Euler characteristic 0") && w[0].contains("'s 2"),
+            "{w:?}"
+        );
+        // sizes recorded without the topology compare size only
+        let old = SurfaceSize {
+            euler: None,
+            components: None,
+            ..size
+        };
+        assert!(old.mismatches(&same_size, 0.05).is_empty());
+        let two = SurfaceSize {
+            components: Some(2),
+            ..size
+        };
+        assert!(size.mismatches(&two, 0.05)[0].contains("2 connected components"));
+        assert_eq!(size.normalized().extent, 1.0);
     }
 }

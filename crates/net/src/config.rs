@@ -143,47 +143,91 @@ impl PoissonNetConfig {
         Ok(())
     }
 
-    /// Parameters of one vector MLP from `W` to `out` channels.
-    fn vector_mlp_parameters(&self, out: usize) -> usize {
-        let w = self.width;
+    /// Parameters of one vector MLP from `W` to `out` channels (in `u128`,
+    /// so no size overflows).
+    fn vector_mlp_parameters(&self, out: usize) -> u128 {
+        let w = self.width as u128;
         let modulation = if self.modulation {
             (w * w + w) + (w * 2 * w + 2 * w)
         } else {
             0
         };
-        let layers: usize = (0..self.vector_layers)
-            .map(|i| {
-                let o = if i + 1 == self.vector_layers { out } else { w };
-                2 * w * o
-            })
-            .sum();
-        modulation + layers + (self.vector_layers - 1) * w
+        let n = self.vector_layers as u128;
+        // the first n - 1 layers are W -> W, the last W -> out
+        let layers = n.saturating_sub(1) * 2 * w * w + 2 * w * out as u128;
+        modulation + layers + n.saturating_sub(1) * w
     }
 
-    /// Parameters of one Poisson block.
-    pub fn block_parameters(&self) -> usize {
-        let w = self.width;
+    /// Parameters of one Poisson block, in `u128`.
+    fn block_parameters_wide(&self) -> u128 {
+        let w = self.width as u128;
         let h = if self.cond_channels > 0 { 3 * w } else { 2 * w };
         let mlp1 = (h * w + w) + (w * w + w);
         let mlp2 = 2 * (w * w + w);
-        self.vector_mlp_parameters(w) + mlp1 + mlp2 + 2 * w
+        self.vector_mlp_parameters(self.width) + mlp1 + mlp2 + 2 * w
     }
 
-    /// Total number of trainable parameters (computed from the sizes; equals
-    /// the count of a built [`crate::PoissonNet`]).
-    pub fn num_parameters(&self) -> usize {
-        let w = self.width;
-        let proj = self.in_channels * w + w;
+    /// Parameters of one Poisson block (saturating at `usize::MAX`).
+    pub fn block_parameters(&self) -> usize {
+        usize::try_from(self.block_parameters_wide()).unwrap_or(usize::MAX)
+    }
+
+    /// Total number of trainable parameters in `u128` (computed from the
+    /// sizes, so absurd sizes give a number instead of an overflow).
+    pub fn num_parameters_wide(&self) -> u128 {
+        let w = self.width as u128;
+        let proj = self.in_channels as u128 * w + w;
         let cond = if self.cond_channels > 0 {
-            (self.cond_channels * w + w) + (w * w + w)
+            (self.cond_channels as u128 * w + w) + (w * w + w)
         } else {
             0
         };
+        let out = self.out_channels as u128;
         let head = match self.head {
             HeadKind::Njf => self.vector_mlp_parameters(self.out_channels),
-            HeadKind::Linear => w * self.out_channels + self.out_channels,
+            HeadKind::Linear => w * out + out,
         };
-        proj + cond + self.blocks * self.block_parameters() + head
+        proj + cond + (self.blocks as u128).saturating_mul(self.block_parameters_wide()) + head
+    }
+
+    /// Total number of trainable parameters (computed from the sizes; equals
+    /// the count of a built [`crate::PoissonNet`]; saturating at
+    /// `usize::MAX`).
+    pub fn num_parameters(&self) -> usize {
+        usize::try_from(self.num_parameters_wide()).unwrap_or(usize::MAX)
+    }
+
+    /// Refuses a network whose `bytes_per_parameter` bytes per parameter
+    /// (4 for the weights alone; 20 to train: weights, gradients, two Adam
+    /// moments and a weight average) exceed this machine's available
+    /// memory, before anything is allocated.
+    ///
+    /// Errors: [`NetError::Config`] naming the size, the need and what is
+    /// available.
+    pub fn ensure_fits(&self, bytes_per_parameter: u128) -> Result<()> {
+        let params = self.num_parameters_wide();
+        let what = format!(
+            "a network of width {} with {} blocks ({params} parameters{})",
+            self.width,
+            self.blocks,
+            if bytes_per_parameter > 4 {
+                ", with gradients and optimizer state"
+            } else {
+                ""
+            }
+        );
+        match mfm_files::space::ensure_memory(&what, params, bytes_per_parameter) {
+            Err(mfm_files::FileError::NoMemory {
+                needed, available, ..
+            }) => Err(NetError::Config(format!(
+                "{what} needs {} of memory, but this machine has {} available; lower \
+                 model.width or model.blocks",
+                mfm_files::space::human_bytes(needed),
+                mfm_files::space::human_bytes(available)
+            ))),
+            Err(other) => Err(NetError::Config(other.to_string())),
+            Ok(()) => Ok(()),
+        }
     }
 
     /// Floating-point operations (two per multiply-add) of the dense matrix

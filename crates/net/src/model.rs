@@ -173,9 +173,12 @@ impl PoissonNet {
     /// (`tch::manual_seed`), and then moved to `device`: a seed gives the same
     /// initial network on every device (CUDA's generator draws other numbers).
     ///
-    /// Errors: [`NetError::Config`] for an invalid configuration.
+    /// Errors: [`NetError::Config`] for an invalid configuration, or one
+    /// whose weights do not fit in the available memory
+    /// ([`PoissonNetConfig::ensure_fits`]).
     pub fn new(config: &PoissonNetConfig, device: Device) -> Result<Self> {
         config.validate()?;
+        config.ensure_fits(4)?;
         let mut vs = nn::VarStore::new(Device::Cpu);
         let root = vs.root();
         let w = config.width;

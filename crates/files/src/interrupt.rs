@@ -1,0 +1,150 @@
+//! What an interrupted command leaves behind: nothing of its own.
+//!
+//! Every [`crate::AtomicFile`] temporary, every [`crate::Undo`] that has not
+//! been kept and every [`crate::FolderLock`] is registered here while it is
+//! alive. A signal handler (the `mfm` binary installs one for SIGINT,
+//! SIGTERM and SIGHUP) calls [`clean_up`] before exiting: the temporaries
+//! and lock files are removed and every open [`crate::Undo`] is undone
+//! (newest first), exactly as if the command had failed. A process killed
+//! with SIGKILL cannot clean up; its temporaries carry its PID in their
+//! names, and the next command that writes there removes them
+//! ([`remove_stale_temporaries`]).
+
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// What is removed when a command is interrupted.
+#[derive(Clone, Debug)]
+pub(crate) enum Pending {
+    /// A file that is ours alone (a temporary, a lock file).
+    File(PathBuf),
+    /// An open [`crate::Undo`]: its taken folder and created paths.
+    Undo {
+        owned: Option<PathBuf>,
+        created: Vec<PathBuf>,
+    },
+}
+
+static NEXT: AtomicU64 = AtomicU64::new(1);
+static PENDING: Mutex<Vec<(u64, Pending)>> = Mutex::new(Vec::new());
+
+fn pending() -> std::sync::MutexGuard<'static, Vec<(u64, Pending)>> {
+    PENDING.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Registers `what`; returns its id.
+pub(crate) fn register(what: Pending) -> u64 {
+    let id = NEXT.fetch_add(1, Ordering::Relaxed);
+    pending().push((id, what));
+    id
+}
+
+/// Replaces the entry `id` (an [`crate::Undo`] that recorded more).
+pub(crate) fn update(id: u64, what: Pending) {
+    if let Some(entry) = pending().iter_mut().find(|(i, _)| *i == id) {
+        entry.1 = what;
+    }
+}
+
+/// Removes the entry `id` (committed, kept or dropped).
+pub(crate) fn forget(id: u64) {
+    pending().retain(|(i, _)| *i != id);
+}
+
+/// Removes everything registered, newest first, and forgets it: for a
+/// signal handler, just before the process exits. Returns how many entries
+/// there were.
+pub fn clean_up() -> usize {
+    let all = std::mem::take(&mut *pending());
+    for (_, what) in all.iter().rev() {
+        match what {
+            Pending::File(p) => {
+                let _ = std::fs::remove_file(p);
+            }
+            Pending::Undo { owned, created } => crate::undo::remove(owned.as_deref(), created),
+        }
+    }
+    all.len()
+}
+
+/// The PID in the name of an mfm temporary of `name` (or of any name when
+/// `name` is `None`): a file `.NAME.PID.N.tmp` ([`crate::AtomicFile`]) or a
+/// folder `.NAME.tmp-PID-N` / `.NAME.old-PID-N` (a dataset being written or
+/// replaced).
+fn temporary_pid(entry: &str, name: Option<&str>) -> Option<u32> {
+    let inner = entry.strip_prefix('.')?;
+    let (stem, pid) = if let Some(rest) = inner.strip_suffix(".tmp") {
+        let mut parts = rest.rsplitn(3, '.');
+        let (n, pid, stem) = (parts.next()?, parts.next()?, parts.next()?);
+        n.parse::<u64>().ok()?;
+        (stem, pid)
+    } else {
+        let (stem, tail) = inner.rsplit_once('.')?;
+        let rest = tail
+            .strip_prefix("tmp-")
+            .or_else(|| tail.strip_prefix("old-"))?;
+        let (pid, n) = rest.split_once('-')?;
+        n.parse::<u64>().ok()?;
+        (stem, pid)
+    };
+    if name.is_some_and(|want| want != stem) {
+        return None;
+    }
+    pid.parse().ok()
+}
+
+/// Removes from the folder `dir` the temporaries of `name` (of any name when
+/// `None`) that an mfm process killed outright left there: those whose PID
+/// is no longer a running process (see [`temporary_pid`] for the names).
+/// Temporaries of a live process, this one included, are left alone.
+/// Returns how many were removed.
+///
+/// Cost: one listing of `dir`.
+pub fn remove_stale_temporaries(dir: &std::path::Path, name: Option<&str>) -> usize {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    let mut removed = 0;
+    for e in entries.flatten() {
+        let file_name = e.file_name();
+        let Some(pid) = file_name.to_str().and_then(|n| temporary_pid(n, name)) else {
+            continue;
+        };
+        if pid == std::process::id() || crate::lock::process_alive(pid) {
+            continue;
+        }
+        let path = e.path();
+        let gone = match e.file_type() {
+            Ok(t) if t.is_dir() => std::fs::remove_dir_all(&path),
+            _ => std::fs::remove_file(&path),
+        };
+        if gone.is_ok() {
+            removed += 1;
+        }
+    }
+    removed
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn temporary_names_give_their_pid() {
+        use super::temporary_pid as pid;
+        assert_eq!(pid(".big.npy.123.0.tmp", None), Some(123));
+        assert_eq!(pid(".big.npy.123.0.tmp", Some("big.npy")), Some(123));
+        assert_eq!(pid(".big.npy.123.0.tmp", Some("other.npy")), None);
+        assert_eq!(pid(".train.tmp-77-0", None), Some(77));
+        assert_eq!(pid(".train.old-77-3", Some("train")), Some(77));
+        for not_ours in [
+            "big.npy",
+            ".hidden",
+            ".x.tmp",
+            ".a.b.tmp",
+            ".train.tmp-x-0",
+            ".t.new-1-2",
+        ] {
+            assert_eq!(pid(not_ours, None), None, "{not_ours}");
+        }
+    }
+}
