@@ -308,7 +308,9 @@ fn evaluate(mfm: &Mfm<'_>, variant_dir: &Path, data: &Path, samples: usize) -> R
             continue;
         }
         let json = eval_dir.join(format!("step-{step}.json"));
-        if !json.is_file() {
+        // a failure recorded by an earlier run is tried again: it may have
+        // been the machine (disk, memory), not the model
+        if !json.is_file() || read_json(&json)?["error"].is_string() {
             let out = variant_dir.join("samples").join(format!("step-{step}"));
             if out.exists() {
                 std::fs::remove_dir_all(&out)
@@ -334,7 +336,7 @@ fn evaluate(mfm: &Mfm<'_>, variant_dir: &Path, data: &Path, samples: usize) -> R
                 }
                 // a model whose sampling breaks down is a result, not a crash
                 Err(e) => {
-                    println!("step {step}: sampling failed; recorded as such");
+                    println!("step {step}: sampling failed ({e:#}); recorded as such");
                     let record = serde_json::json!({ "error": format!("{e:#}") });
                     std::fs::write(&json, serde_json::to_string_pretty(&record)?)
                         .with_context(|| format!("cannot write {}", json.display()))?;
@@ -453,7 +455,7 @@ fn write_report(out: &Path, results: &[(Variant, Vec<Point>)]) -> Result<()> {
                 )?;
                 writeln!(
                     md,
-                    "| {} | {} | {:.0} | sampling diverged | | | | | | | |",
+                    "| {} | {} | {:.0} | sampling failed (see the log) | | | | | | | |",
                     v.name, p.step, p.seconds
                 )?;
                 continue;
@@ -498,10 +500,15 @@ fn write_report(out: &Path, results: &[(Variant, Vec<Point>)]) -> Result<()> {
             .filter(|p| !p.failed)
             .map(|p| p.quality.residual[1])
             .fold(f64::INFINITY, f64::min);
+        let best = if best.is_finite() {
+            format!("{best:.3}")
+        } else {
+            "none sampled".to_owned()
+        };
         let last = points.last();
         writeln!(
             summary,
-            "| {} | {} | {:.0} | {} | {} | {:.3} |",
+            "| {} | {} | {:.0} | {} | {} | {} |",
             v.name,
             last.map_or(0, |p| p.step),
             last.map_or(0.0, |p| p.seconds),

@@ -136,11 +136,25 @@ pub fn train(a: TrainArgs) -> Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = Arc::clone(&stop);
-        // A second Ctrl-C while the final checkpoint is written kills the
-        // process as usual.
+        let out = a.out.clone();
+        // A second Ctrl-C (or SIGTERM, SIGHUP) ends the process at once:
+        // its temporaries (a checkpoint or model half written) and its lock
+        // go; a run folder this command created goes too unless it holds a
+        // checkpoint, the user's progress.
         let installed = ctrlc::set_handler(move || {
             if stop.swap(true, Ordering::SeqCst) {
-                std::process::exit(130);
+                let progress =
+                    mfm_fm::checkpoint::list_checkpoints(&out).is_ok_and(|c| !c.is_empty());
+                if progress {
+                    mfm_files::interrupt::clean_up_temporaries();
+                    eprintln!(
+                        "\nmfm: killed; removed this command's temporaries, the run's checkpoints are intact"
+                    );
+                } else {
+                    mfm_files::interrupt::clean_up();
+                    eprintln!("\nmfm: killed; removed what this command had written");
+                }
+                mfm_files::interrupt::exit_now(130);
             }
             eprintln!(
                 "\nmfm: stopping after this step and writing a checkpoint (Ctrl-C again to kill)"

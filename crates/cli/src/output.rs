@@ -34,7 +34,7 @@ pub fn clean_up_on_interrupt() {
     let installed = ctrlc::set_handler(|| {
         mfm_files::interrupt::clean_up();
         eprintln!("\nmfm: interrupted; removed what this command had written");
-        std::process::exit(130);
+        mfm_files::interrupt::exit_now(130);
     });
     if let Err(e) = installed {
         eprintln!(

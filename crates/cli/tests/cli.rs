@@ -918,6 +918,24 @@ fn deformation_dataset_trains_on_coarse_and_samples_on_finer_meshes() {
     ]);
     assert!(!o.status.success());
     assert!(stderr(&o).contains("small-holes"), "{}", stderr(&o));
+    // another surface's mesh with this space: refused, nothing written
+    let o = mfm(&[
+        "remesh",
+        "builtin:torus",
+        "--damage",
+        "small-holes",
+        "--space",
+        &p("data/space.json"),
+        "--out",
+        &p("torus.ply"),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("not the space's surface"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dir.path().join("torus.ply").exists());
 }
 
 #[cfg(feature = "network")]

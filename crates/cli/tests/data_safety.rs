@@ -756,6 +756,53 @@ fn runs_survive_signals_edits_moves_and_damage() {
         !moved.join(".long.mfm-lock").exists(),
         "the lock goes with its holder"
     );
+
+    // a second signal ends it at once: no temporaries (a checkpoint or model
+    // half written) or lock are left, and the run's checkpoints stay
+    let two_signals = |args: &[&str], started: &dyn Fn() -> bool| {
+        let child = Command::new(env!("CARGO_BIN_EXE_mfm"))
+            .current_dir(&moved)
+            .args(args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let t0 = std::time::Instant::now();
+        while !started() {
+            assert!(t0.elapsed().as_secs() < 120, "training did not start");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        for _ in 0..2 {
+            let status = Command::new("kill")
+                .args(["-TERM", &child.id().to_string()])
+                .status()
+                .unwrap();
+            assert!(status.success());
+        }
+        child.wait_with_output().unwrap()
+    };
+    let lines = fs::read_to_string(&log).unwrap().lines().count();
+    let o = two_signals(&["train", "--out", "long", "--resume", "--quiet"], &|| {
+        fs::read_to_string(&log).map_or(0, |l| l.lines().count()) > lines + 2
+    });
+    assert_eq!(o.status.code(), Some(130), "{}", err(&o));
+    let hidden: Vec<_> = walk(&moved)
+        .into_iter()
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with('.'))
+        })
+        .collect();
+    assert!(hidden.is_empty(), "left behind: {hidden:?}");
+    let kept: Vec<_> = fs::read_dir(moved.join("long/checkpoints"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert!(!kept.is_empty(), "the checkpoints were removed");
+    for c in &kept {
+        assert!(c.join("state.json").is_file(), "{} is torn", c.display());
+    }
 }
 
 /// Borrowed arguments of owned ones.

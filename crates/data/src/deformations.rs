@@ -294,6 +294,43 @@ impl std::str::FromStr for Damage {
     }
 }
 
+/// Largest relative difference between a mesh's bounding-box diagonal and
+/// the diagonal a [`DeformSpace`] was made for ([`space_fits`]).
+pub const SPACE_DIAGONAL_TOLERANCE: f64 = 0.05;
+
+/// Checks that `space` belongs to `mesh`'s surface (any triangulation of
+/// it, in the space's units): the bounding-box diagonals agree within
+/// [`SPACE_DIAGONAL_TOLERANCE`] and every handle ball holds vertices of
+/// `mesh`, disjointly. A space made for another surface (or for this one
+/// in other units) would place its handles, and so the regions damage must
+/// spare, anywhere.
+///
+/// # Errors
+/// [`DataError::Config`] naming both diagonals or the handle without a
+/// vertex.
+pub fn space_fits(mesh: &TriMesh, space: &DeformSpace) -> Result<()> {
+    let diag = mesh.bounding_box_diagonal();
+    let rel = (diag - space.diagonal).abs() / space.diagonal.abs().max(f64::MIN_POSITIVE);
+    if rel.is_nan() || rel > SPACE_DIAGONAL_TOLERANCE {
+        return Err(DataError::Config(format!(
+            "the deformation space was made for a surface of bounding-box diagonal {}, this mesh's is {}: not the space's surface (use the meshes of the dataset the space belongs to)",
+            four_digits(space.diagonal),
+            four_digits(diag)
+        )));
+    }
+    space.handles.regions(mesh).map_err(|e| {
+        DataError::Config(format!(
+            "the deformation space does not fit this mesh ({e}): not the space's surface"
+        ))
+    })?;
+    Ok(())
+}
+
+/// `x` to four significant digits, in the shared number format.
+fn four_digits(x: f64) -> String {
+    mfm_files::fmt_f64(format!("{x:.3e}").parse().unwrap_or(x))
+}
+
 /// `mesh` damaged as `damage` says, keeping every handle region of the
 /// space's handles intact (hole centres are drawn among vertices farther than the hole
 /// radius plus the handle radius from every handle centre; the partial
@@ -302,6 +339,7 @@ impl std::str::FromStr for Damage {
 /// component is kept. Deterministic in `seed`.
 ///
 /// # Errors
+/// [`space_fits`]'s when the space is not of `mesh`'s surface;
 /// [`DataError::Config`] when no vertex is far enough from the handles for a
 /// hole; [`DataError::MeshProcessing`] when punching fails.
 pub fn damaged_mesh(
@@ -310,6 +348,7 @@ pub fn damaged_mesh(
     damage: Damage,
     seed: u64,
 ) -> Result<TriMesh> {
+    space_fits(mesh, space)?;
     let handles = &space.handles;
     use mfm_processing::flips::{FlipAmount, random_edge_flips};
     use mfm_processing::holes::{HoleMetric, largest_component, punch_holes};

@@ -73,6 +73,38 @@ fn damaged_meshes_keep_every_handle_region() {
         assert_eq!(damage.name().parse::<Damage>().unwrap(), damage);
     }
     assert!("dents".parse::<Damage>().is_err());
+    // a space of another surface (or of this one in other units) is refused
+    let scaled = mfm_geometry::TriMesh::new(
+        m.eval
+            .positions()
+            .iter()
+            .map(|p| p.map(|x| 2.0 * x))
+            .collect(),
+        m.eval.faces().to_vec(),
+    )
+    .unwrap();
+    let e = damaged_mesh(&scaled, &space, Damage::SmallHoles, 3)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("bounding-box diagonal") && e.contains("not the space's surface"),
+        "{e}"
+    );
+    let elsewhere = mfm_geometry::TriMesh::new(
+        m.eval
+            .positions()
+            .iter()
+            .map(|p| [p[0] + 0.5, p[1], p[2]])
+            .collect(),
+        m.eval.faces().to_vec(),
+    )
+    .unwrap();
+    let e = deformations::space_fits(&elsewhere, &space)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("does not fit this mesh"), "{e}");
+    deformations::space_fits(&m.eval, &space).unwrap();
+    deformations::space_fits(&m.coarse, &space).unwrap();
     // larger holes remove more
     let faces = |d| damaged_mesh(&m.eval, &space, d, 3).unwrap().num_faces();
     assert!(faces(Damage::LargeHoles) < faces(Damage::SmallHoles));

@@ -19,6 +19,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 pub(crate) enum Pending {
     /// A file that is ours alone (a temporary, a lock file).
     File(PathBuf),
+    /// A temporary folder that is ours alone, with all in it
+    /// ([`TemporaryDir`]).
+    Dir(PathBuf),
     /// An open [`crate::Undo`]: its taken folder and created paths.
     Undo {
         owned: Option<PathBuf>,
@@ -58,14 +61,79 @@ pub(crate) fn forget(id: u64) {
 pub fn clean_up() -> usize {
     let all = std::mem::take(&mut *pending());
     for (_, what) in all.iter().rev() {
-        match what {
-            Pending::File(p) => {
-                let _ = std::fs::remove_file(p);
-            }
-            Pending::Undo { owned, created } => crate::undo::remove(owned.as_deref(), created),
-        }
+        remove(what);
     }
     all.len()
+}
+
+/// Removes only the temporaries and lock files ([`crate::AtomicFile`],
+/// [`TemporaryDir`], [`crate::FolderLock`]), newest first, and forgets
+/// them; open [`crate::Undo`]s stay as they are. For a command whose
+/// output already holds the user's progress (a training run with a
+/// checkpoint), which an interrupt must not undo. Returns how many were
+/// removed.
+pub fn clean_up_temporaries() -> usize {
+    let mut all = pending();
+    let (temporaries, rest): (Vec<_>, Vec<_>) = std::mem::take(&mut *all)
+        .into_iter()
+        .partition(|(_, what)| !matches!(what, Pending::Undo { .. }));
+    *all = rest;
+    drop(all);
+    for (_, what) in temporaries.iter().rev() {
+        remove(what);
+    }
+    temporaries.len()
+}
+
+fn remove(what: &Pending) {
+    match what {
+        Pending::File(p) => {
+            let _ = std::fs::remove_file(p);
+        }
+        Pending::Dir(p) => {
+            let _ = std::fs::remove_dir_all(p);
+        }
+        Pending::Undo { owned, created } => crate::undo::remove(owned.as_deref(), created),
+    }
+}
+
+/// Ends the process at once with `code`, from a signal handler's thread:
+/// no exit handlers or static destructors run (libtorch's, torn down while
+/// the main thread is inside it, crash the process instead of letting it
+/// exit with `code`). Call [`clean_up`] or [`clean_up_temporaries`] first;
+/// standard error is unbuffered, so what was printed is out.
+pub fn exit_now(code: i32) -> ! {
+    #[cfg(unix)]
+    {
+        // SAFETY: _exit only ends the process; nothing of ours is touched.
+        unsafe { libc::_exit(code) }
+    }
+    #[cfg(not(unix))]
+    std::process::exit(code)
+}
+
+/// A temporary folder (a checkpoint being written) that an interrupt
+/// removes whole while this guard lives. Dropping the guard only forgets
+/// the folder: by then it was renamed into place or removed by its writer.
+#[derive(Debug)]
+#[must_use = "the folder is registered only while the guard lives"]
+pub struct TemporaryDir {
+    id: u64,
+}
+
+impl TemporaryDir {
+    /// Registers `dir` (created by the caller, ours alone).
+    pub fn register(dir: &std::path::Path) -> Self {
+        Self {
+            id: register(Pending::Dir(dir.to_path_buf())),
+        }
+    }
+}
+
+impl Drop for TemporaryDir {
+    fn drop(&mut self) {
+        forget(self.id);
+    }
 }
 
 /// The PID in the name of an mfm temporary of `name` (or of any name when

@@ -37,14 +37,22 @@ pub struct FolderLock {
 }
 
 impl FolderLock {
-    /// Locks `dir` (which need not exist) for `command`, the line the
-    /// refusal of a second writer names.
+    /// Locks `dir` (which need not exist, nor its parents: missing parents
+    /// are created, as the command writing `dir` would) for `command`, the
+    /// line the refusal of a second writer names.
     ///
     /// # Errors
     /// [`FileError::Locked`] naming the folder and its holder;
     /// [`FileError::Io`] when the lock file cannot be created.
     pub fn acquire(dir: &Path, command: &str) -> Result<Self, FileError> {
         let path = lock_path(dir);
+        // `--out a/b/c` with `a/b` not made yet: the command would create
+        // the parents anyway, and the lock lives among them
+        if let Some(parent) = path.parent()
+            && !parent.as_os_str().is_empty()
+        {
+            fs::create_dir_all(parent).map_err(|e| FileError::io(parent, e))?;
+        }
         loop {
             let mut file = OpenOptions::new()
                 .read(true)
@@ -225,5 +233,20 @@ mod tests {
         assert!(!dir.path().join(".run.mfm-lock").exists());
         assert_eq!(holder_pid("PID 12 (x)"), Some(12));
         assert!(!process_alive(999_999_999));
+    }
+
+    #[test]
+    fn a_folder_whose_parents_do_not_exist_yet_can_be_locked() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("samples").join("deeper").join("step-100");
+        let held = FolderLock::acquire(&out, "mfm sample").unwrap();
+        assert!(held.path().exists());
+        assert!(!out.exists(), "the folder itself is the command's to make");
+        drop(held);
+        assert!(
+            !dir.path()
+                .join("samples/deeper/.step-100.mfm-lock")
+                .exists()
+        );
     }
 }

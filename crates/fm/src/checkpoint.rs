@@ -573,6 +573,8 @@ pub fn write_checkpoint(
         std::fs::remove_dir_all(&tmp).map_err(|e| FmError::io(&tmp, e))?;
     }
     std::fs::create_dir(&tmp).map_err(|e| FmError::io(&tmp, e))?;
+    // an interrupt that kills the process before the rename removes it
+    let _interruptible = mfm_files::interrupt::TemporaryDir::register(&tmp);
     fill(&tmp)?;
     let mut files = BTreeMap::new();
     for entry in std::fs::read_dir(&tmp).map_err(|e| FmError::io(&tmp, e))? {

@@ -19,7 +19,7 @@
 //! width = 64                   # optional overrides of the preset's sizes
 //! blocks = 4
 //! vector_layers = 3
-//! head = "njf"                 # or "linear"
+//! head = "njf"                 # or "linear", "njf_no_input_gradient"
 //! modulation = true
 //! condition_on_xyz = false     # condition on t only (true: source xyz and t)
 //! mean_offset = true
@@ -161,8 +161,10 @@ pub struct ModelConfig {
     /// Complex layers per vector MLP `nl`, overriding the preset's.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub vector_layers: Option<usize>,
-    /// Output head: `njf` (the paper's; vertex and Jacobian velocities) or
-    /// `linear`. Default `njf`.
+    /// Output head: `njf` (the paper's; vertex and Jacobian velocities),
+    /// `njf_no_input_gradient` (the same without adding the input's
+    /// gradients to the Jacobian output, an ablation) or `linear`. Default
+    /// `njf`.
     pub head: HeadKind,
     /// Whether the vector MLPs are modulated (default `true`, the paper's).
     pub modulation: bool,

@@ -77,7 +77,7 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use mfm_geometry::TriMesh;
 use mfm_geometry::frame::{CanonicalFrame, SurfaceSize};
-use mfm_net::{HeadKind, MeshTensors, PoissonNet, loss};
+use mfm_net::{MeshTensors, PoissonNet, loss};
 use mfm_noise::NoiseSampler;
 use rand::Rng;
 use tch::{Device, Tensor};
@@ -360,8 +360,7 @@ fn resolve_flow(
     };
     // the NJF head's output has zero mean, so the mean must come from the
     // offset; a linear head learns it unless the targets are centred
-    let offset_on =
-        config.model.mean_offset && (config.model.head == HeadKind::Njf || config.train.center);
+    let offset_on = config.model.mean_offset && (config.model.head.is_njf() || config.train.center);
     Ok(FlowSpec {
         channels: c,
         noise: config.noise.kind,

@@ -14,9 +14,21 @@ pub enum HeadKind {
     /// Outputs the vertex field and the Jacobian field.
     #[default]
     Njf,
+    /// The NJF head without the input-gradient residual: the vector MLP's
+    /// output alone is the Jacobian field (an ablation of the paper's head;
+    /// `C_in` and `C_out` may differ). Same parameters as [`HeadKind::Njf`].
+    NjfNoInputGradient,
     /// A per-vertex `Linear(W, C_out)` on the final features (vertex output
     /// only).
     Linear,
+}
+
+impl HeadKind {
+    /// Whether this is one of the neural-Jacobian-field heads (vertex and
+    /// Jacobian outputs, the vertex output's mean removed).
+    pub fn is_njf(self) -> bool {
+        matches!(self, Self::Njf | Self::NjfNoInputGradient)
+    }
 }
 
 /// Hyper-parameters of a [`crate::PoissonNet`]; stored as JSON next to the
@@ -184,7 +196,9 @@ impl PoissonNetConfig {
         };
         let out = self.out_channels as u128;
         let head = match self.head {
-            HeadKind::Njf => self.vector_mlp_parameters(self.out_channels),
+            HeadKind::Njf | HeadKind::NjfNoInputGradient => {
+                self.vector_mlp_parameters(self.out_channels)
+            }
             HeadKind::Linear => w * out + out,
         };
         proj + cond + (self.blocks as u128).saturating_mul(self.block_parameters_wide()) + head
@@ -273,7 +287,9 @@ impl PoissonNetConfig {
             + 2 * v * w * w; // MLP2
         let out = self.out_channels as u64;
         let head = match self.head {
-            HeadKind::Njf => modulation + hidden + complex(f, w, out),
+            HeadKind::Njf | HeadKind::NjfNoInputGradient => {
+                modulation + hidden + complex(f, w, out)
+            }
             HeadKind::Linear => v * w * out,
         };
         let cond = if conditioned {

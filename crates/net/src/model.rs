@@ -56,7 +56,8 @@ pub use mfm_kernels::fused::{
 
 #[derive(Debug)]
 enum Head {
-    Njf(VectorMlp),
+    /// The vector MLP, and whether `G X_in` is added to its output.
+    Njf(VectorMlp, bool),
     Linear(nn::Linear),
 }
 
@@ -197,13 +198,16 @@ impl PoissonNet {
             })
             .collect();
         let head = match config.head {
-            HeadKind::Njf => Head::Njf(VectorMlp::new(
-                &root / "head",
-                w,
-                config.vector_layers,
-                config.out_channels,
-                config.modulation,
-            )),
+            HeadKind::Njf | HeadKind::NjfNoInputGradient => Head::Njf(
+                VectorMlp::new(
+                    &root / "head",
+                    w,
+                    config.vector_layers,
+                    config.out_channels,
+                    config.modulation,
+                ),
+                config.head == HeadKind::Njf,
+            ),
             HeadKind::Linear => {
                 Head::Linear(linear(&root / "head" / "linear", w, config.out_channels))
             }
@@ -376,9 +380,13 @@ impl PoissonNet {
                 vertex: dense(l, &h)?,
                 jacobian: None,
             }),
-            Head::Njf(vector) => {
+            Head::Njf(vector, input_gradient) => {
                 let g = vector.forward(&mesh.gradient(&h)?, &h, mesh)?;
-                let g = g + mesh.gradient(&x_in)?;
+                let g = if *input_gradient {
+                    g + mesh.gradient(&x_in)?
+                } else {
+                    g
+                };
                 let u = {
                     let _s = section("head.poisson");
                     mesh.remove_mass_mean(&mesh.solve(&mesh.divergence(&g)?)?)?

@@ -298,7 +298,7 @@ mod tests {
                 assert!(names.contains(must), "{must} missing");
             }
             match head {
-                HeadKind::Njf => {
+                HeadKind::Njf | HeadKind::NjfNoInputGradient => {
                     assert!(names.contains("base_model.head.grad_mlp.layers.0.lin_real.weight"))
                 }
                 HeadKind::Linear => assert!(names.contains("base_model.head.weight")),

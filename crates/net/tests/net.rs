@@ -316,6 +316,51 @@ fn linear_head_and_unconditioned_network_run_and_differentiate() {
 }
 
 #[test]
+fn the_njf_head_without_the_input_gradient_is_the_njf_head_minus_g_x_in() {
+    tch::manual_seed(5);
+    let mesh = procedural::icosphere(1);
+    let mt = MeshTensors::new(&mesh).unwrap();
+    let v = mt.num_vertices() as i64;
+    let mut with = PoissonNet::new(&tiny(4, 2, HeadKind::Njf), Device::Cpu).unwrap();
+    let cfg = tiny(4, 2, HeadKind::NjfNoInputGradient);
+    assert_eq!(cfg.num_parameters(), with.config().num_parameters());
+    let mut without = PoissonNet::new(&cfg, Device::Cpu).unwrap();
+    with.set_kind(Kind::Double);
+    without.set_kind(Kind::Double);
+    without.var_store_mut().copy(with.var_store()).unwrap();
+    let x = randn(&[2, v, 3]);
+    let e = randn(&[2, v, 2]);
+    let a = with.forward(&mt, &x, Some(&e)).unwrap();
+    let b = without.forward(&mt, &x, Some(&e)).unwrap();
+    let ga = a.jacobian.unwrap();
+    let gb = b.jacobian.unwrap();
+    assert!(rel_max_diff(&(&ga - mt.gradient(&x).unwrap()), &gb) < 1e-12);
+    // the vertex output is the solve of the Jacobian's divergence, mean removed
+    let ub = mt
+        .remove_mass_mean(&mt.solve(&mt.divergence(&gb).unwrap()).unwrap())
+        .unwrap();
+    assert!(rel_max_diff(&b.vertex, &ub) < 1e-10);
+    assert!(
+        rel_max_diff(&a.vertex, &b.vertex) > 1e-3,
+        "the residual matters"
+    );
+    // without the residual, C_in and C_out may differ
+    let other = PoissonNetConfig {
+        out_channels: 5,
+        ..tiny(4, 1, HeadKind::NjfNoInputGradient)
+    };
+    let net = PoissonNet::new(&other, Device::Cpu).unwrap();
+    let out = net
+        .forward(
+            &mt,
+            &randn(&[1, v, 3]).to_kind(Kind::Float),
+            Some(&randn(&[1, v, 2]).to_kind(Kind::Float)),
+        )
+        .unwrap();
+    assert_eq!(out.vertex.size(), vec![1, v, 5]);
+}
+
+#[test]
 fn input_errors_name_the_expected_shape() {
     let mesh = procedural::icosphere(1);
     let mt = MeshTensors::new(&mesh).unwrap();
