@@ -759,32 +759,13 @@ fn runs_survive_signals_edits_moves_and_damage() {
 
     // a second signal ends it at once: no temporaries (a checkpoint or model
     // half written) or lock are left, and the run's checkpoints stay
-    let two_signals = |args: &[&str], started: &dyn Fn() -> bool| {
-        let child = Command::new(env!("CARGO_BIN_EXE_mfm"))
-            .current_dir(&moved)
-            .args(args)
-            .stdout(std::process::Stdio::piped())
-            .stderr(std::process::Stdio::piped())
-            .spawn()
-            .unwrap();
-        let t0 = std::time::Instant::now();
-        while !started() {
-            assert!(t0.elapsed().as_secs() < 120, "training did not start");
-            std::thread::sleep(std::time::Duration::from_millis(20));
-        }
-        for _ in 0..2 {
-            let status = Command::new("kill")
-                .args(["-TERM", &child.id().to_string()])
-                .status()
-                .unwrap();
-            assert!(status.success());
-        }
-        child.wait_with_output().unwrap()
-    };
     let lines = fs::read_to_string(&log).unwrap().lines().count();
-    let o = two_signals(&["train", "--out", "long", "--resume", "--quiet"], &|| {
-        fs::read_to_string(&log).map_or(0, |l| l.lines().count()) > lines + 2
-    });
+    let o = signals_when(
+        &moved,
+        &["train", "--out", "long", "--resume", "--quiet"],
+        || fs::read_to_string(&log).map_or(0, |l| l.lines().count()) > lines + 2,
+        &["-TERM", "-TERM"],
+    );
     assert_eq!(o.status.code(), Some(130), "{}", err(&o));
     let hidden: Vec<_> = walk(&moved)
         .into_iter()
@@ -1941,6 +1922,16 @@ fn interrupt_when(
     ready: impl Fn() -> bool,
     signal: &str,
 ) -> std::process::Output {
+    signals_when(dir, args, ready, &[signal])
+}
+
+/// [`interrupt_when`] sending each of `signals` in turn, at once.
+fn signals_when(
+    dir: &Path,
+    args: &[&str],
+    ready: impl Fn() -> bool,
+    signals: &[&str],
+) -> std::process::Output {
     let child = Command::new(env!("CARGO_BIN_EXE_mfm"))
         .current_dir(dir)
         .args(args)
@@ -1953,11 +1944,13 @@ fn interrupt_when(
         assert!(t0.elapsed().as_secs() < 120, "{args:?} did not get going");
         std::thread::sleep(std::time::Duration::from_millis(10));
     }
-    let status = Command::new("kill")
-        .args([signal, &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
+    for signal in signals {
+        let status = Command::new("kill")
+            .args([*signal, &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success());
+    }
     child.wait_with_output().unwrap()
 }
 
