@@ -7,7 +7,8 @@
 //! `fixtures/pretrained/gmm-blob/` (`cargo xtask pretrain gmm`) samples the
 //! non-uniform mesh (seconds: what the method gives after longer training);
 //! then the demo trains its own short run with Matérn noise in the canonical
-//! frame (3000 steps of the `cpu` network: a few minutes on two cores) and
+//! frame (2000 steps of the pretrained model's recipe: a few minutes on two
+//! cores) and
 //! samples it the same way. Both are judged by the sample quality (bump fit
 //! against the data's floor, training signals beside samples on one colour
 //! scale) next to the distribution metrics, side by side; plus Matérn vs
@@ -32,9 +33,11 @@ const DEMO_STEPS: u64 = 2000;
 
 /// The demo's run configuration: the pretrained model's recipe (PoissonNet
 /// W32 K3 nl3; canonical frame, sigma 3, centred noise and targets, 20
-/// midpoint steps; the official loss; sampling with the weight average)
-/// trained 2000 steps instead of 10,000: a few minutes on two cores.
-/// docs/BENCHMARKS.md ("Time to quality") has the whole curve.
+/// midpoint steps; the official loss; sampling with the weight average; a
+/// 250-step warm-up to 4e-3 and a cosine decay to the last step) trained
+/// 2000 steps instead of 5000: a few minutes on two cores.
+/// docs/BENCHMARKS.md ("Time to quality") has the whole curve and the
+/// controlled runs that chose the schedule.
 const DEMO_CONFIG: &str = "\
 # mfm demo run: `mfm train --config run.toml` (every other field has its default)
 [model]
@@ -46,7 +49,8 @@ vector_layers = 3
 [train]
 steps = 2000
 batch = 4
-lr = 2e-3
+lr = 4e-3
+lr_schedule = { warmup = 250, cosine = 2000, floor = 1e-5 }
 ema = 0.999
 checkpoint_every = 500
 log_every = 100

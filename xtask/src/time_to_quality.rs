@@ -43,12 +43,12 @@ pub struct TimeToQualityArgs {
     pub out: PathBuf,
     /// Variants, comma-separated: `NAME:WIDTHxBLOCKSxLAYERS` optionally
     /// followed by `:SECTION.KEY=VALUE;...` run-config settings (TOML
-    /// values), e.g. `W32-ema:32x3x3:train.ema=0.999`.
-    #[arg(
-        long,
-        value_delimiter = ',',
-        default_value = "W16K2:16x2x2,W32K3:32x3x3,W64K4:64x4x3"
-    )]
+    /// values), e.g. `W32-ema:32x3x3:train.ema=0.999`; `data.signals=N`
+    /// trains on N signals of the same generator instead of 1000 (the
+    /// evaluation's reference set stays the same).
+    /// Commas inside brackets or braces (`keep_at = [1000, 2000]`,
+    /// `lr_schedule = { warmup = 250, cosine = 3000 }`) do not split.
+    #[arg(long, default_value = "W16K2:16x2x2,W32K3:32x3x3,W64K4:64x4x3")]
     pub variants: Vec<String>,
     /// Training budget per variant in minutes of training time (summed over
     /// resumed calls).
@@ -65,6 +65,27 @@ pub struct TimeToQualityArgs {
     pub plot: Option<PathBuf>,
 }
 
+/// Splits a `--variants` list at the commas that are not inside brackets or
+/// braces (TOML arrays and inline tables keep theirs); empty items are
+/// dropped.
+fn split_variants(list: &str) -> Vec<&str> {
+    let mut out = Vec::new();
+    let (mut depth, mut start) = (0i32, 0);
+    for (i, c) in list.char_indices() {
+        match c {
+            '[' | '{' => depth += 1,
+            ']' | '}' => depth -= 1,
+            ',' if depth <= 0 => {
+                out.push(&list[start..i]);
+                start = i + 1;
+            }
+            _ => {}
+        }
+    }
+    out.push(&list[start..]);
+    out.into_iter().filter(|v| !v.trim().is_empty()).collect()
+}
+
 /// One variant: a network size and run-config settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Variant {
@@ -74,7 +95,13 @@ pub struct Variant {
     pub size: (usize, usize, usize),
     /// `(section, key, TOML value)`.
     pub settings: Vec<(String, String, String)>,
+    /// Training signals (`data.signals`, [`DEFAULT_SIGNALS`] unless given).
+    pub signals: usize,
 }
+
+/// Training signals of a variant that does not set `data.signals`: the
+/// demo's 1000.
+pub const DEFAULT_SIGNALS: usize = 1000;
 
 impl std::str::FromStr for Variant {
     type Err = anyhow::Error;
@@ -101,6 +128,7 @@ impl std::str::FromStr for Variant {
             bail!("variant {s:?}: size {size:?} is not WIDTHxBLOCKSxLAYERS");
         };
         let mut settings = Vec::new();
+        let mut signals = DEFAULT_SIGNALS;
         for item in parts
             .next()
             .unwrap_or_default()
@@ -113,12 +141,27 @@ impl std::str::FromStr for Variant {
             let (section, key) = key.trim().split_once('.').with_context(|| {
                 format!("variant {s:?}: setting {item:?} needs a section (model., train., noise.)")
             })?;
+            if section == "data" {
+                if key != "signals" {
+                    bail!("variant {s:?}: the data section has one setting, `signals`");
+                }
+                signals = value
+                    .trim()
+                    .parse::<usize>()
+                    .ok()
+                    .filter(|&n| n >= 2)
+                    .with_context(|| {
+                        format!("variant {s:?}: data.signals must be a count of at least 2, found {value:?}")
+                    })?;
+                continue;
+            }
             settings.push((section.to_owned(), key.to_owned(), value.trim().to_owned()));
         }
         Ok(Self {
             name: name.to_owned(),
             size: (w, k, nl),
             settings,
+            signals,
         })
     }
 }
@@ -169,6 +212,14 @@ impl Variant {
             entries.push((key.clone(), value.clone()));
         }
         let mut toml = format!("# cargo xtask time-to-quality, variant {}\n", self.name);
+        if self.signals != DEFAULT_SIGNALS {
+            // not a run setting, but part of what the variant is: a changed
+            // count is refused like a changed setting
+            toml.push_str(&format!(
+                "# trained on {} signals (data.signals)\n",
+                self.signals
+            ));
+        }
         for (section, entries) in sections {
             toml.push_str(&format!("[{section}]\n"));
             for (k, v) in entries {
@@ -185,6 +236,8 @@ struct Point {
     /// Sampling broke down (the quality numbers are NaN).
     failed: bool,
     step: u64,
+    /// Samples the evaluation generated (0 when sampling failed).
+    samples: usize,
     seconds: f64,
     quality: Quality,
     cov: f64,
@@ -347,6 +400,7 @@ fn evaluate(mfm: &Mfm<'_>, variant_dir: &Path, data: &Path, samples: usize) -> R
         points.push(Point {
             failed: m["error"].is_string(),
             step: *step,
+            samples: m["num_generated"].as_u64().unwrap_or(0) as usize,
             seconds: checkpoint_seconds(dir)?,
             quality: Quality::of(&m),
             cov: num(&m, "cov"),
@@ -362,6 +416,7 @@ pub fn run(env: &PyEnv, args: &TimeToQualityArgs) -> Result<()> {
     let variants: Vec<Variant> = args
         .variants
         .iter()
+        .flat_map(|list| split_variants(list))
         .map(|v| v.parse())
         .collect::<Result<_>>()?;
     if variants.is_empty() {
@@ -400,11 +455,20 @@ pub fn run(env: &PyEnv, args: &TimeToQualityArgs) -> Result<()> {
                 .with_context(|| format!("cannot write {}", config.display()))?,
         }
         if !args.eval_only {
+            // other training-set sizes: the same generator and seed, their
+            // own folder; every variant is evaluated on `data/reference`
+            let train_data = if v.signals == DEFAULT_SIGNALS {
+                data.clone()
+            } else {
+                let d = out.join(format!("data-{}", v.signals));
+                mfm.ensure_gmm_dataset(&d, v.signals)?;
+                d
+            };
             train_for(
                 &exe,
                 &dir.join("run"),
                 &config,
-                &data.join("train"),
+                &train_data.join("train"),
                 args.minutes * 60.0,
             )?;
         }
@@ -435,10 +499,10 @@ fn first_below(points: &[Point], bound: f64) -> Option<&Point> {
 
 fn write_report(out: &Path, results: &[(Variant, Vec<Point>)]) -> Result<()> {
     let mut csv = String::from(
-        "variant,width,blocks,layers,step,train_seconds,residual_q1,residual_median,residual_q3,peak_median,bumps_above_half,data_like,diversity,mmd,cov,test_error\n",
+        "variant,width,blocks,layers,step,train_seconds,samples,residual_q1,residual_median,residual_q3,peak_median,bumps_above_half,data_like,diversity,mmd,cov,test_error\n",
     );
     let mut md = String::from(
-        "| variant | step | train s | residual median [q1, q3] | peak median | bumps > 1/2 | data-like | diversity | MMD | COV | test error |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| variant | step | train s | samples | residual median [q1, q3] | peak median | bumps > 1/2 | data-like | diversity | MMD | COV | test error |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let mut summary = String::from(
         "\n| variant | steps | train s | to residual <= 0.5 | to residual <= 0.35 | best residual |\n|---|---|---|---|---|---|\n",
@@ -450,22 +514,23 @@ fn write_report(out: &Path, results: &[(Variant, Vec<Point>)]) -> Result<()> {
             if p.failed {
                 writeln!(
                     csv,
-                    "{},{w},{k},{nl},{},{:.1},,,,,,,,,,",
+                    "{},{w},{k},{nl},{},{:.1},0,,,,,,,,,,",
                     v.name, p.step, p.seconds
                 )?;
                 writeln!(
                     md,
-                    "| {} | {} | {:.0} | sampling failed (see the log) | | | | | | | |",
+                    "| {} | {} | {:.0} | | sampling failed (see the log) | | | | | | | |",
                     v.name, p.step, p.seconds
                 )?;
                 continue;
             }
             writeln!(
                 csv,
-                "{},{w},{k},{nl},{},{:.1},{:.4},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{:.5},{:.3},{:.5}",
+                "{},{w},{k},{nl},{},{:.1},{},{:.4},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{:.5},{:.3},{:.5}",
                 v.name,
                 p.step,
                 p.seconds,
+                p.samples,
                 q.residual[0],
                 q.residual[1],
                 q.residual[2],
@@ -479,10 +544,11 @@ fn write_report(out: &Path, results: &[(Variant, Vec<Point>)]) -> Result<()> {
             )?;
             writeln!(
                 md,
-                "| {} | {} | {:.0} | {} | {:.4} | {:.3} | {:.4} |",
+                "| {} | {} | {:.0} | {} | {} | {:.4} | {:.3} | {:.4} |",
                 v.name,
                 p.step,
                 p.seconds,
+                p.samples,
                 q.cells(),
                 p.mmd,
                 p.cov,
@@ -608,11 +674,51 @@ mod tests {
                 ("noise".into(), "scale".into(), "\"data\"".into())
             ]
         );
+        assert_eq!(v.signals, DEFAULT_SIGNALS);
         let plain: Variant = "W16K2:16x2x2".parse().unwrap();
         assert!(plain.settings.is_empty());
-        for bad in ["", "W:16x2", "W:16x2x2:ema=1", "bad name:16x2x2", "W:axbxc"] {
+        let more: Variant = "W32-4k:32x3x3:data.signals=4000;train.ema=0.999"
+            .parse()
+            .unwrap();
+        assert_eq!(more.signals, 4000);
+        assert_eq!(
+            more.settings,
+            vec![("train".into(), "ema".into(), "0.999".into())]
+        );
+        assert!(!more.config_toml().contains("signals ="));
+        assert!(more.config_toml().contains("# trained on 4000 signals"));
+        for bad in [
+            "",
+            "W:16x2",
+            "W:16x2x2:ema=1",
+            "bad name:16x2x2",
+            "W:axbxc",
+            "W:16x2x2:data.signals=1",
+            "W:16x2x2:data.signals=many",
+            "W:16x2x2:data.seed=3",
+        ] {
             assert!(bad.parse::<Variant>().is_err(), "{bad:?} should be refused");
         }
+    }
+
+    #[test]
+    fn variant_lists_split_outside_brackets_and_braces() {
+        let list = "A:16x2x2:train.keep_at=[1000, 2000],B:32x3x3:train.lr_schedule={ warmup = 250, cosine = 3000 };train.ema=0.9,C:8x1x1,";
+        let parts = split_variants(list);
+        assert_eq!(
+            parts,
+            vec![
+                "A:16x2x2:train.keep_at=[1000, 2000]",
+                "B:32x3x3:train.lr_schedule={ warmup = 250, cosine = 3000 };train.ema=0.9",
+                "C:8x1x1"
+            ]
+        );
+        let b: Variant = parts[1].parse().unwrap();
+        assert!(
+            b.config_toml()
+                .contains("lr_schedule = { warmup = 250, cosine = 3000 }\n")
+        );
+        assert!(!b.config_toml().contains("milestones"));
     }
 
     #[test]
