@@ -34,8 +34,9 @@ const DEMO_STEPS: u64 = 2000;
 /// The demo's run configuration: the pretrained model's recipe (PoissonNet
 /// W32 K3 nl3; canonical frame, sigma 3, centred noise and targets, 20
 /// midpoint steps; the official loss; sampling with the weight average; a
-/// 250-step warm-up to 4e-3 and a cosine decay to the last step) trained
-/// 2000 steps instead of 5000: a few minutes on two cores.
+/// 250-step warm-up to 4e-3 and a cosine decay to the last step;
+/// logit-normal path times) trained 2000 steps instead of 5000: a few
+/// minutes on two cores.
 /// docs/BENCHMARKS.md ("Time to quality") has the whole curve and the
 /// controlled runs that chose the schedule.
 const DEMO_CONFIG: &str = "\
@@ -52,6 +53,7 @@ batch = 4
 lr = 4e-3
 lr_schedule = { warmup = 250, cosine = 2000, floor = 1e-5 }
 ema = 0.999
+time = \"logit-normal\"
 checkpoint_every = 500
 log_every = 100
 ";
