@@ -36,11 +36,12 @@ pub const PRETRAIN_SIGNALS: usize = 1000;
 
 /// The pretrained model's run configuration: the `cpu` preset's recipe
 /// (see `RunConfig::preset("cpu")`: the official loss, sampling with the
-/// weight average) at width 32, 3 blocks, with the two changes that won
-/// the controlled runs of docs/BENCHMARKS.md ("Training beyond the
-/// paper"): a linear warm-up over 250 steps to a peak rate of 4e-3, then a
-/// cosine decay to 1e-5 at the last step (5000), and path times drawn from
-/// a logit-normal instead of the uniform; on one thread. A run is a pure
+/// weight average, and the two changes that won the controlled runs of
+/// docs/BENCHMARKS.md, "Training beyond the paper") at width 32, 3 blocks,
+/// for 5000 steps on one thread: a linear warm-up over 250 steps (the
+/// preset's 5%) to a peak rate of 4e-3, then a cosine decay to 1e-5 at the
+/// last step, and path times drawn from a logit-normal instead of the
+/// uniform. A run is a pure
 /// function of its seed, data and thread count, so the command makes the
 /// same weights again.
 pub const PRETRAIN_CONFIG: &str = "\

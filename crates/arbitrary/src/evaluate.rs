@@ -26,7 +26,9 @@
 //! - **predictor error**: per source, the mean over vectors `1..k` of the
 //!   mass-weighted relative error of the predicted eigenvectors against the
 //!   basis of the set's rest mesh ([`relative_errors`]), and over vectors
-//!   `1..=8` alone.
+//!   `1..=8` alone. Not measured for a predictor imported from the
+//!   authors' checkpoint ([`predictor_error_skipped`]): it was trained on
+//!   their basis, whose sign and normalization conventions are not mfm's.
 
 use std::path::Path;
 use std::time::Instant;
@@ -71,11 +73,14 @@ pub struct SetEvaluation {
     pub mmd: f64,
     /// Coverage of those poses.
     pub cov: f64,
-    /// The predictor's mean relative error per source (vectors `1..k`).
-    pub predictor_error: Quartiles,
+    /// The predictor's mean relative error per source (vectors `1..k`);
+    /// `None` when not measured ([`predictor_error_skipped`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub predictor_error: Option<Quartiles>,
     /// The same over the first eight non-constant vectors (`1..=8`), the
-    /// coarse layout of the body.
-    pub predictor_error_low: Quartiles,
+    /// coarse layout of the body; `None` when not measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub predictor_error_low: Option<Quartiles>,
     /// Seconds per generated target.
     pub seconds_per_sample: f64,
 }
@@ -85,10 +90,17 @@ impl SetEvaluation {
     /// `mfm eval-arbitrary` prints).
     pub fn summary(&self) -> String {
         let ratio = |a: f64, b: f64| a / b.max(f64::MIN_POSITIVE);
+        let predictor = match (&self.predictor_error, &self.predictor_error_low) {
+            (Some(all), Some(low)) => format!(
+                "predictor error {:.3} (vectors 1-8: {:.3})",
+                all.median, low.median
+            ),
+            _ => "predictor error not measured (imported predictor)".to_owned(),
+        };
         format!(
             "{:>9} ({} vertices, {} sources x {}): projection {:.2e} [{:.2e}, {:.2e}] (floor {:.2e}), \
              displacement ratio {:.2}, pose spread {:.2}/{:.2} of the data's, MMD {:.4}, COV {:.2}, \
-             predictor error {:.3} (vectors 1-8: {:.3})",
+             {predictor}",
             self.set,
             self.vertices,
             self.sources,
@@ -108,8 +120,6 @@ impl SetEvaluation {
             ),
             self.mmd,
             self.cov,
-            self.predictor_error.median,
-            self.predictor_error_low.median
         )
     }
 }
@@ -124,6 +134,23 @@ pub struct Example {
     pub generated: Vec<Vec<[f64; 3]>>,
     /// Another pose of the same shape from the data.
     pub truth: Vec<[f64; 3]>,
+}
+
+/// Why the predictor's error against the set's own eigenbasis is not
+/// measured for `sampler`, or `None` when it is: a predictor imported from
+/// the authors' checkpoint records no eigenvalues
+/// ([`crate::predictor::PredictorSpec::has_own_basis`]) and was trained on
+/// their basis, so its output need not match mfm's (signs, normalization).
+pub fn predictor_error_skipped(sampler: &ArbitrarySampler) -> Option<String> {
+    if sampler.predictor().spec().has_own_basis() {
+        return None;
+    }
+    Some(
+        "the predictor was imported from the authors' checkpoint: it records no eigenvalues \
+         and was trained on their eigenbasis (their signs and normalization), so its error \
+         against mfm's basis of each set is not measured"
+            .to_owned(),
+    )
 }
 
 fn flat(p: &[[f64; 3]]) -> Vec<f32> {
@@ -173,7 +200,12 @@ pub fn evaluate_set(
     let mass = mfm_geometry::operators::lumped_mass(&rest);
     let metric = MassWeighted::new(&mass, 3)?;
     let k = sampler.predictor().eigenvectors();
-    let basis = Eigenbasis::of(&rest, k)?;
+    let measure_predictor = predictor_error_skipped(sampler).is_none();
+    let basis = if measure_predictor {
+        Some(Eigenbasis::of(&rest, k)?)
+    } else {
+        None
+    };
     let (mut projection, mut floor, mut moved, mut data_moved) = (vec![], vec![], vec![], vec![]);
     let (mut gen_params, mut ref_params) = (vec![], vec![]);
     let (mut predictor_error, mut predictor_error_low) = (vec![], vec![]);
@@ -212,11 +244,13 @@ pub fn evaluate_set(
             moved.push(metric.distance(&g, &source_values)?);
             generated_all.extend(g);
         }
-        let predicted = sampler.eigenvectors_on(&source)?;
-        let errors = relative_errors(&rest, &basis, &predicted)?;
-        let mean = |e: &[f64]| e.iter().sum::<f64>() / e.len().max(1) as f64;
-        predictor_error.push(mean(&errors[1..]));
-        predictor_error_low.push(mean(&errors[1..k.min(9)]));
+        if let Some(basis) = &basis {
+            let predicted = sampler.eigenvectors_on(&source)?;
+            let errors = relative_errors(&rest, basis, &predicted)?;
+            let mean = |e: &[f64]| e.iter().sum::<f64>() / e.len().max(1) as f64;
+            predictor_error.push(mean(&errors[1..]));
+            predictor_error_low.push(mean(&errors[1..k.min(9)]));
+        }
         examples.push(Example {
             source,
             generated: out,
@@ -244,8 +278,8 @@ pub fn evaluate_set(
             reference_pose_spread: spread(&ref_params),
             mmd: mmd(&d)?,
             cov: coverage(&d)?,
-            predictor_error: Quartiles::of(&predictor_error),
-            predictor_error_low: Quartiles::of(&predictor_error_low),
+            predictor_error: measure_predictor.then(|| Quartiles::of(&predictor_error)),
+            predictor_error_low: measure_predictor.then(|| Quartiles::of(&predictor_error_low)),
             seconds_per_sample: seconds / n_gen.max(1) as f64,
         },
         examples,

@@ -10,7 +10,9 @@
 //! `x_t = (1 - t) x0 + t x1`; the loss is the flow-matching loss against
 //! `x1 - x0` (vertex and Jacobian terms). Sampling integrates the velocity from noise on the
 //! source with the midpoint rule, adds the source's mass-weighted centroid
-//! and maps back to the source's units.
+//! and maps back to the source's units (with [`SourceFrame::AsIs`], the
+//! imported official model's convention: no frame, no centroid, targets
+//! mass-mean zero).
 //!
 //! Run folder: [`ARBITRARY_SPEC`], a copy of the predictor
 //! ([`PREDICTOR_WEIGHTS`], its `.json`, [`PREDICTOR_COPY_SPEC`], their checksums in [`PREDICTOR_RECORD`]), the log,
@@ -35,7 +37,7 @@ use tch::{Device, Kind, Tensor};
 use crate::predictor::{EigenPredictor, PredictorSpec, positions_tensor, prepared};
 use crate::run::{Optimization, TrainReport};
 use crate::sources::SourceSet;
-use crate::{Schedule, finished_weights, read_json, same_config, to_own_frame};
+use crate::{Schedule, SourceFrame, finished_weights, read_json, same_config};
 use mfm_fm::checkpoint::{NET_CONFIG_FILE, WEIGHTS_FILE};
 use mfm_fm::context::MeshContext;
 use mfm_fm::seeding::derived_rng;
@@ -49,8 +51,9 @@ pub const PREDICTOR_WEIGHTS: &str = "predictor.safetensors";
 pub const PREDICTOR_COPY_SPEC: &str = "predictor.spec.json";
 /// The checksums of the copied predictor's files (checked on every load).
 pub const PREDICTOR_RECORD: &str = "predictor.state.json";
-/// The copied predictor's network configuration.
-const PREDICTOR_NET_CONFIG: &str = "predictor.json";
+/// The copied predictor's network configuration (written beside
+/// [`PREDICTOR_WEIGHTS`]).
+pub const PREDICTOR_NET_CONFIG: &str = "predictor.json";
 
 const PURPOSE_ITEMS: u64 = 21;
 
@@ -76,6 +79,10 @@ pub struct FlowConfig {
     pub eigenvectors: bool,
     /// Optimization.
     pub schedule: Schedule,
+    /// Where sources are put before the networks see them and where the
+    /// targets end up (absent in the description: [`SourceFrame::Own`]).
+    #[serde(default, skip_serializing_if = "SourceFrame::is_own")]
+    pub frame: SourceFrame,
 }
 
 fn yes() -> bool {
@@ -109,6 +116,7 @@ impl FlowConfig {
                 seed: 42,
                 checkpoint_every: 10_000,
             },
+            frame: SourceFrame::Own,
         }
     }
 
@@ -218,6 +226,7 @@ pub fn train(
     };
     let template = data.mesh().clone();
     let identity = mfm_data::dataset::mesh_identity(&template);
+    refuse_imported(run_dir)?;
     std::fs::create_dir_all(run_dir).map_err(|e| FmError::io(run_dir, e))?;
     let spec_path = run_dir.join(ARBITRARY_SPEC);
     if spec_path.is_file() {
@@ -234,6 +243,15 @@ pub fn train(
                 predictor_dir.display(),
                 source.spec().dataset.display(),
                 dataset.display()
+            )));
+        }
+        if source.spec().config.frame != config.frame {
+            return Err(FmError::Config(format!(
+                "the predictor in {} puts sources in the {:?} frame, the flow's configuration in \
+                 the {:?} frame: they must agree",
+                predictor_dir.display(),
+                source.spec().config.frame,
+                config.frame
             )));
         }
         if source.spec().vertices != template.num_vertices() {
@@ -303,6 +321,7 @@ pub fn train(
                 meshes.positions(si),
                 Some(&mut target),
                 schedule.augment.then_some(&mut rng),
+                config.frame,
             )?;
             let ctx = if schedule.augment {
                 Arc::new(sources.build(src.clone())?)
@@ -346,6 +365,24 @@ pub fn train(
     })
 }
 
+/// The error for training in `run_dir` when it holds an imported model
+/// ([`crate::official`]): it has no training state (no dataset, optimizer
+/// or checkpoints) to continue from.
+pub(crate) fn refuse_imported(run_dir: &Path) -> Result<()> {
+    let record = run_dir.join(mfm_fm::official::IMPORT_FILE);
+    if record.is_file() {
+        return Err(FmError::Config(format!(
+            "{} holds a model imported from the authors' checkpoint ({}): it has no training \
+             state to resume (no dataset, optimizer or checkpoints); sample it with \
+             mfm sample --run {} --source MESH, or train a new run into another folder",
+            run_dir.display(),
+            record.display(),
+            run_dir.display()
+        )));
+    }
+    Ok(())
+}
+
 fn load_copied_predictor(run_dir: &Path) -> Result<EigenPredictor> {
     mfm_fm::checkpoint::verify_file_record(run_dir, PREDICTOR_RECORD)?;
     let spec: PredictorSpec = read_json(
@@ -383,6 +420,16 @@ impl ArbitrarySampler {
         )?;
         let weights = finished_weights(run_dir, "model")?;
         let predictor = load_copied_predictor(run_dir)?;
+        if predictor.spec().config.frame != spec.config.frame {
+            return Err(FmError::format(
+                run_dir.join(ARBITRARY_SPEC),
+                format!(
+                    "the flow's source frame ({:?}) is not its predictor's ({:?}, in {PREDICTOR_COPY_SPEC})",
+                    spec.config.frame,
+                    predictor.spec().config.frame
+                ),
+            ));
+        }
         let mut net = PoissonNet::new(
             &spec.config.net_config(predictor.eigenvectors()),
             Device::Cpu,
@@ -428,9 +475,10 @@ impl ArbitrarySampler {
     }
 
     /// `count` targets generated over `source` (any mesh; its own frame,
-    /// the result back in its units), samples `first..first + count` of
-    /// `seed`'s noise stream. Each sample's noise depends only on `(seed,
-    /// index)`.
+    /// the result back in its units with the source's mass-weighted
+    /// centroid; with [`SourceFrame::AsIs`] the source as it is and the
+    /// result mass-mean zero), samples `first..first + count` of `seed`'s
+    /// noise stream. Each sample's noise depends only on `(seed, index)`.
     ///
     /// Cost: the source's operators and factorizations once, the predictor
     /// once, then `2 ode_steps` network evaluations per sample.
@@ -446,7 +494,7 @@ impl ArbitrarySampler {
         seed: u64,
     ) -> Result<Vec<Vec<[f64; 3]>>> {
         let mut positions = source.positions().to_vec();
-        let frame = to_own_frame(&mut positions, None)?;
+        let frame = self.spec.config.frame.apply(&mut positions, None)?;
         let moved = source
             .with_positions(positions.clone())
             .map_err(|e| FmError::Config(e.to_string()))?;
@@ -458,7 +506,11 @@ impl ArbitrarySampler {
             let k = self.predictor.eigenvectors() as i64;
             Tensor::zeros([1, x_src.size()[1], k], (Kind::Float, Device::Cpu))
         };
-        let centroid = ctx.tensors.mass_weighted_mean(&x_src)?;
+        // the official model's targets stay mass-mean zero (AsIs)
+        let centroid = match frame {
+            Some(_) => Some(ctx.tensors.mass_weighted_mean(&x_src)?),
+            None => None,
+        };
         let v = source.num_vertices() as i64;
         let steps = self.spec.config.ode_steps.max(1);
         let h = 1.0 / steps as f64;
@@ -476,7 +528,11 @@ impl ArbitrarySampler {
                     let mid = &x + velocity(&x, t)? * (h / 2.0);
                     x = &x + velocity(&mid, t + h / 2.0)? * h;
                 }
-                let x = (x + &centroid).to_kind(Kind::Double).flatten(0, -1);
+                let x = match &centroid {
+                    Some(c) => x + c,
+                    None => x,
+                };
+                let x = x.to_kind(Kind::Double).flatten(0, -1);
                 let flat = Vec::<f64>::try_from(x)?;
                 if flat.iter().any(|y| !y.is_finite()) {
                     return Err(FmError::Diverged(format!(
@@ -485,7 +541,10 @@ impl ArbitrarySampler {
                 }
                 Ok(flat
                     .chunks_exact(3)
-                    .map(|c| frame.from_canonical([c[0], c[1], c[2]]))
+                    .map(|c| {
+                        let p = [c[0], c[1], c[2]];
+                        frame.as_ref().map_or(p, |f| f.from_canonical(p))
+                    })
                     .collect())
             })
             .collect()

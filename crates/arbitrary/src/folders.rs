@@ -185,10 +185,13 @@ impl TrainingRun {
     ///
     /// # Errors
     /// [`mfm_files::FileError::NotEmpty`] for a fresh run in a folder
-    /// with anything in it; [`FmError::Config`] for an unknown preset, or a
-    /// flow without a predictor; an unreadable stored specification.
+    /// with anything in it; [`FmError::Config`] for an unknown preset, a
+    /// flow without a predictor, or resuming a run imported from the
+    /// authors' checkpoint ([`crate::official`]); an unreadable stored
+    /// specification.
     pub fn prepare(kind: RunKind, out: &Path, fresh: Option<&FreshRun>) -> Result<Self> {
         let Some(f) = fresh else {
+            flow::refuse_imported(out)?;
             let spec = out.join(kind.spec_file());
             let plan = match kind {
                 RunKind::Predictor => {

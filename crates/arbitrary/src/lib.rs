@@ -19,12 +19,15 @@
 //!    factorizations per source).
 //!
 //! ## Frames
-//! Every source is moved into its own canonical frame
-//! ([`mfm_geometry::frame`]: bounding box centred, largest extent 1) and
-//! its target by the same map; generated targets come back through the
-//! inverse. With augmentation (the official recipe) both then get one
-//! random scale in `[0.7, 1.3]` and one Gaussian shift of standard
-//! deviation 0.15 per item.
+//! By default ([`SourceFrame::Own`]) every source is moved into its own
+//! canonical frame ([`mfm_geometry::frame`]: bounding box centred, largest
+//! extent 1) and its target by the same map; generated targets come back
+//! through the inverse, with the source's mass-weighted centroid added. A
+//! run imported from the authors' code ([`official`]) uses
+//! [`SourceFrame::AsIs`] instead: sources as they are, targets left
+//! mass-mean zero, as the official model was trained and samples. With
+//! augmentation (the official recipe) both then get one random scale in
+//! `[0.7, 1.3]` and one Gaussian shift of standard deviation 0.15 per item.
 //!
 //! ## Randomness
 //! Every random choice of step `s` (items, times, noise, augmentation) is a
@@ -34,6 +37,7 @@
 pub mod evaluate;
 pub mod flow;
 pub mod folders;
+pub mod official;
 pub mod predictor;
 mod run;
 pub mod sources;
@@ -113,6 +117,51 @@ impl Schedule {
 pub const AUGMENT_SCALE: (f64, f64) = (0.7, 1.3);
 /// The standard deviation of the augmentation's shift.
 pub const AUGMENT_SHIFT: f64 = 0.15;
+
+/// Where a run puts a source before its networks see it, and where the
+/// generated targets end up.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SourceFrame {
+    /// mfm's convention (the default, and what runs written before this
+    /// option hold): each source moved into its own canonical frame
+    /// ([`to_own_frame`]: bounding box centred, largest extent 1); the
+    /// targets come back into the source's units with its mass-weighted
+    /// centroid added.
+    #[default]
+    Own,
+    /// The official code's convention (imported runs): sources as they
+    /// are, in their own units and place; the targets keep the mass-mean
+    /// zero the flow generates (no centroid added back), as the official
+    /// sampler writes them.
+    AsIs,
+}
+
+impl SourceFrame {
+    /// Whether this is [`SourceFrame::Own`] (for `skip_serializing_if`: a
+    /// run of the default frame writes its description as before).
+    pub fn is_own(&self) -> bool {
+        *self == Self::Own
+    }
+
+    /// Moves `positions` (and `also` by the same map) into this frame:
+    /// [`to_own_frame`] for [`SourceFrame::Own`] (returning the frame), no
+    /// change for [`SourceFrame::AsIs`] (`None`).
+    ///
+    /// # Errors
+    /// [`FmError::Config`] for a degenerate bounding box
+    /// ([`SourceFrame::Own`] only).
+    pub fn apply(
+        self,
+        positions: &mut [[f64; 3]],
+        also: Option<&mut [[f64; 3]]>,
+    ) -> Result<Option<mfm_geometry::frame::CanonicalFrame>> {
+        match self {
+            Self::Own => to_own_frame(positions, also).map(Some),
+            Self::AsIs => Ok(None),
+        }
+    }
+}
 
 /// Moves `positions` (and `also`, the same map) into the canonical frame
 /// of `positions`' bounding box: centred, largest extent 1. Returns the

@@ -1,5 +1,6 @@
 //! The eigenvector predictor: a PoissonNet with a linear head that maps a
-//! source mesh's vertex positions (in its own canonical frame) to the
+//! source mesh's vertex positions (in its own canonical frame, or as they
+//! are for a [`SourceFrame::AsIs`] predictor) to the
 //! template's first `k` Laplacian eigenvectors
 //! ([`mfm_data::eigenbasis::Eigenbasis`], signs fixed by its rule),
 //! trained on every mesh of a dataset of template shapes with the
@@ -26,7 +27,7 @@ use tch::{Device, Kind, Tensor};
 use crate::run::{Optimization, TrainReport};
 use crate::sources::SourceSet;
 use crate::{
-    AUGMENT_SCALE, AUGMENT_SHIFT, Schedule, finished_weights, read_json, same_config, to_own_frame,
+    AUGMENT_SCALE, AUGMENT_SHIFT, Schedule, SourceFrame, finished_weights, read_json, same_config,
 };
 use mfm_fm::seeding::derived_rng;
 use mfm_fm::{FmError, Result};
@@ -50,6 +51,10 @@ pub struct PredictorConfig {
     pub blocks: usize,
     /// Optimization.
     pub schedule: Schedule,
+    /// Where sources are put before the network sees them (absent in the
+    /// description: [`SourceFrame::Own`]).
+    #[serde(default, skip_serializing_if = "SourceFrame::is_own")]
+    pub frame: SourceFrame,
 }
 
 /// Preset names of [`PredictorConfig::preset`].
@@ -75,6 +80,7 @@ impl PredictorConfig {
                 seed: 42,
                 checkpoint_every: 10_000,
             },
+            frame: SourceFrame::Own,
         }
     }
 
@@ -131,7 +137,9 @@ pub struct PredictorSpec {
     pub dataset: PathBuf,
     /// Vertices of the template.
     pub vertices: usize,
-    /// The template's eigenvalues (its canonical frame).
+    /// The template's eigenvalues (its canonical frame); empty for a
+    /// predictor imported from the authors' checkpoint, whose targets mfm
+    /// did not compute ([`PredictorSpec::has_own_basis`]).
     pub eigenvalues: Vec<f64>,
     /// The sign rule's margins ([`Eigenbasis::margins`]).
     pub margins: Vec<f64>,
@@ -142,14 +150,25 @@ pub struct PredictorSpec {
     pub template: Option<String>,
 }
 
-/// A source moved into its own frame (and the same map applied to
-/// `also`), then scaled and shifted by the step's augmentation.
+impl PredictorSpec {
+    /// Whether the predictor was trained here on a basis mfm computed (its
+    /// eigenvalues are recorded), so that its output can be compared with
+    /// that basis on a mesh; `false` for an imported predictor, trained on
+    /// the authors' own basis (their sign and normalization conventions).
+    pub fn has_own_basis(&self) -> bool {
+        !self.eigenvalues.is_empty()
+    }
+}
+
+/// A source moved into `frame` (and the same map applied to `also`),
+/// then scaled and shifted by the step's augmentation.
 pub(crate) fn prepared(
     mut positions: Vec<[f64; 3]>,
     mut also: Option<&mut Vec<[f64; 3]>>,
     augment: Option<&mut rand_chacha::ChaCha8Rng>,
+    frame: SourceFrame,
 ) -> Result<Vec<[f64; 3]>> {
-    to_own_frame(
+    frame.apply(
         &mut positions,
         also.as_deref_mut().map(|v| v.as_mut_slice()),
     )?;
@@ -219,6 +238,7 @@ pub fn train(
             config.eigenvectors
         )));
     }
+    crate::flow::refuse_imported(run_dir)?;
     std::fs::create_dir_all(run_dir).map_err(|e| FmError::io(run_dir, e))?;
     let spec_path = run_dir.join(PREDICTOR_SPEC);
     let targets_path = run_dir.join(TARGETS_FILE);
@@ -278,6 +298,7 @@ pub fn train(
                 meshes.positions(i),
                 None,
                 schedule.augment.then_some(&mut rng),
+                config.frame,
             )?;
             let ctx = if schedule.augment {
                 std::sync::Arc::new(sources.build(p.clone())?)
@@ -354,13 +375,19 @@ impl EigenPredictor {
         Ok(out.vertex.detach())
     }
 
-    /// The prediction on `mesh` (any triangulation; moved into its own
-    /// frame first), vertex-major `[V, k]`.
+    /// The prediction on `mesh` (any triangulation; moved into the
+    /// predictor's [`SourceFrame`] first: its own frame, or as it is),
+    /// vertex-major `[V, k]`.
     ///
     /// # Errors
     /// A degenerate mesh, network errors.
     pub fn predict(&self, mesh: &TriMesh) -> Result<Vec<f32>> {
-        let p = prepared(mesh.positions().to_vec(), None, None)?;
+        let p = prepared(
+            mesh.positions().to_vec(),
+            None,
+            None,
+            self.spec.config.frame,
+        )?;
         let moved = mesh
             .with_positions(p.clone())
             .map_err(|e| FmError::Config(e.to_string()))?;

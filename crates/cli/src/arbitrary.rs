@@ -214,6 +214,9 @@ pub fn eval(a: EvalArgs) -> Result<()> {
     let _lock = crate::output::lock_folder(&a.out)?;
     mfm_fm::sample_folder::check_output_folder(&a.out, a.force, "mfm eval-arbitrary", &EVAL_FILES)?;
     let sampler = ArbitrarySampler::load(&a.run)?;
+    if let Some(why) = mfm_arbitrary::evaluate::predictor_error_skipped(&sampler) {
+        println!("predictor error against the sets' eigenbases: skipped ({why})");
+    }
     let folder = EvalFolder {
         run: &a.run,
         experiment: &a.experiment,

@@ -193,6 +193,14 @@ pub fn train(a: TrainArgs) -> Result<()> {
             );
         }
         use mfm_arbitrary::folders::FolderKind;
+        if a.out.join(mfm_fm::official::IMPORT_FILE).is_file() {
+            bail!(
+                "--out {}: a model imported from the authors' checkpoint (mfm import): it has no \
+                 training state to resume (no dataset, optimizer or checkpoints); sample it, or \
+                 train a new run into another folder",
+                a.out.display()
+            );
+        }
         let found = FolderKind::of(&a.out);
         if let (FolderKind::PredictorRun | FolderKind::ArbitraryRun, Some(flags)) =
             (found, found.resume_flags())

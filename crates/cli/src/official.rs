@@ -6,6 +6,10 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
+use mfm_arbitrary::official::{
+    ARBITRARY_MODEL_TYPE, IMPORTED_FILES as ARBITRARY_FILES, import_official_arbitrary,
+    official_model_type,
+};
 use mfm_fm::official::{IMPORTED_FILES, export_official, import_official};
 
 use crate::mesh::load_mesh_checked;
@@ -20,16 +24,28 @@ pub struct ImportArgs {
     #[arg(long)]
     checkpoint: PathBuf,
     /// The checkpoint's YAML configuration (configs/*.yaml of the official
-    /// code, or the config.yaml of its results folder).
+    /// code, or the config.yaml of its results folder). Its model.type
+    /// chooses the import: Matern_FM (one mesh) or
+    /// Matern_FM_arbitrary_source (any source mesh; the checkpoint holds
+    /// the eigenvector predictor too).
     #[arg(long)]
     config: PathBuf,
     /// The template mesh the model was trained on (e.g. the official
     /// demo/meshes/stanford_bunny/bunny_10k.obj); recorded as the training
     /// surface, so sampling on a mesh of another size or place warns.
+    /// Required for a single-source model; optional for an arbitrary-source
+    /// one (sources unlike it are then reported).
     #[arg(long)]
-    mesh: String,
+    mesh: Option<String>,
+    /// Arbitrary-source models only: the eigenvector predictor's own
+    /// checkpoint (e.g. ckpts/smpl_eigenvecs_predictor.ckpt), checked to
+    /// hold the same weights as the predictor inside --checkpoint.
+    #[arg(long)]
+    predictor_checkpoint: Option<PathBuf>,
     /// The run folder to write (missing or empty): config.toml, flow.json,
-    /// model.safetensors, model.json, model.state.json, import.json.
+    /// model.safetensors, model.json, model.state.json, import.json (an
+    /// arbitrary-source model: arbitrary.json, the model and predictor
+    /// files, import.json).
     #[arg(long)]
     out: PathBuf,
 }
@@ -50,9 +66,32 @@ pub struct ExportArgs {
     force: bool,
 }
 
-/// Runs `mfm import`.
+/// Runs `mfm import`: routes on the configuration's `model.type`.
 pub fn import(a: ImportArgs) -> Result<()> {
-    let mesh = load_mesh_checked(&a.mesh)?;
+    let kind = official_model_type(&a.config)
+        .with_context(|| format!("reading --config {}", a.config.display()))?;
+    if kind == ARBITRARY_MODEL_TYPE {
+        return import_arbitrary(a);
+    }
+    if kind != "Matern_FM" {
+        // the single-source reader says what the type is and what to do
+        mfm_fm::official::OfficialConfig::read(&a.config)
+            .with_context(|| format!("importing {}", a.checkpoint.display()))?;
+    }
+    if a.predictor_checkpoint.is_some() {
+        bail!(
+            "--predictor-checkpoint is for arbitrary-source models; {} is a {kind} model",
+            a.config.display()
+        );
+    }
+    let Some(mesh_name) = a.mesh.clone() else {
+        bail!(
+            "importing a single-source model ({kind}, {}) needs --mesh: the template mesh it was \
+             trained on",
+            a.config.display()
+        );
+    };
+    let mesh = load_mesh_checked(&mesh_name)?;
     let _lock = crate::output::lock_folder(&a.out)?;
     crate::output::ensure_empty(&a.out).with_context(|| {
         format!(
@@ -64,7 +103,7 @@ pub fn import(a: ImportArgs) -> Result<()> {
         &a.checkpoint,
         &a.config,
         &mesh,
-        std::path::Path::new(&a.mesh),
+        std::path::Path::new(&mesh_name),
         &a.out,
     )
     .with_context(|| {
@@ -93,7 +132,71 @@ pub fn import(a: ImportArgs) -> Result<()> {
     println!(
         "sample it with: mfm sample --run {} --mesh {} --out SAMPLES",
         a.out.display(),
-        a.mesh
+        mesh_name
+    );
+    Ok(())
+}
+
+/// `mfm import` of an arbitrary-source model
+/// ([`mfm_arbitrary::official`]).
+fn import_arbitrary(a: ImportArgs) -> Result<()> {
+    let mesh = match &a.mesh {
+        Some(name) => Some((load_mesh_checked(name)?, PathBuf::from(name))),
+        None => None,
+    };
+    let _lock = crate::output::lock_folder(&a.out)?;
+    crate::output::ensure_empty(&a.out).with_context(|| {
+        format!(
+            "mfm import writes a new run folder ({})",
+            ARBITRARY_FILES.join(", ")
+        )
+    })?;
+    let record = import_official_arbitrary(
+        &a.checkpoint,
+        &a.config,
+        a.predictor_checkpoint.as_deref(),
+        mesh.as_ref().map(|(m, p)| (m, p.as_path())),
+        &a.out,
+    )
+    .with_context(|| {
+        format!(
+            "importing the arbitrary-source model {} with {}{}; nothing was written",
+            a.checkpoint.display(),
+            a.config.display(),
+            a.predictor_checkpoint
+                .as_ref()
+                .map(|p| format!(" and the predictor {}", p.display()))
+                .unwrap_or_default()
+        )
+    })?;
+    println!(
+        "imported the arbitrary-source flow ({} parameters) and its eigenvector predictor ({} \
+         parameters){} from {} -> {}",
+        record.flow_parameters,
+        record.predictor_parameters,
+        record
+            .global_step
+            .map(|s| format!(" (step {s})"))
+            .unwrap_or_default(),
+        a.checkpoint.display(),
+        a.out.display()
+    );
+    if let Some(p) = &record.predictor_checkpoint {
+        println!(
+            "the predictor checkpoint {} holds the same weights",
+            p.display()
+        );
+    }
+    if !record.ignored_entries.is_empty() {
+        println!(
+            "not read (training state): {}",
+            record.ignored_entries.join(", ")
+        );
+    }
+    println!(
+        "sources are used as they are (the official data's units and place) and the targets are \
+         mass-mean zero; sample it with: mfm sample --run {} --source MESH --out SAMPLES",
+        a.out.display()
     );
     Ok(())
 }

@@ -277,3 +277,128 @@ fn import_errors_name_the_file_at_fault() {
     let e = text(&o);
     assert!(e.contains("norm.yaml") && e.contains("mlp_norm"), "{e}");
 }
+
+fn arbitrary(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../fixtures/official-arbitrary")
+        .join(name)
+        .to_string_lossy()
+        .into_owned()
+}
+
+#[test]
+fn import_of_an_arbitrary_source_model_then_sample_over_a_source() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let p = |x: &Path| x.to_string_lossy().into_owned();
+    let o = mfm(&[
+        "import",
+        "--checkpoint",
+        &arbitrary("arbitrary.ckpt"),
+        "--config",
+        &arbitrary("config.yaml"),
+        "--predictor-checkpoint",
+        &arbitrary("predictor.ckpt"),
+        "--out",
+        &p(&run),
+    ]);
+    let said = text(&o);
+    assert!(o.status.success(), "{said}");
+    assert!(
+        said.contains("arbitrary-source flow") && said.contains("(step 1234)"),
+        "{said}"
+    );
+    assert!(said.contains("same weights"), "{said}");
+
+    let samples = dir.path().join("samples");
+    let o = mfm(&[
+        "sample",
+        "--run",
+        &p(&run),
+        "--source",
+        &arbitrary("template.obj"),
+        "--n",
+        "2",
+        "--steps",
+        "3",
+        "--out",
+        &p(&samples),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let (shape, drawn) = read_samples(&samples.join("samples.npy"));
+    assert_eq!(shape, vec![2, 18, 3]);
+    assert!(drawn.iter().all(|x| x.is_finite()));
+
+    // an imported run has no training state to continue
+    for mode in [None, Some("arbitrary"), Some("predictor")] {
+        let mut args = vec!["train", "--resume", "--out", run.to_str().unwrap()];
+        if let Some(m) = mode {
+            args.extend(["--mode", m]);
+        }
+        let o = mfm(&args);
+        assert!(!o.status.success(), "{mode:?}");
+        let said = text(&o);
+        assert!(
+            said.contains("imported") && said.contains("resume"),
+            "{mode:?}: {said}"
+        );
+    }
+
+    // a predictor that is not the flow's is refused naming both files,
+    // and nothing is written
+    let other = dir.path().join("other");
+    let o = mfm(&[
+        "import",
+        "--checkpoint",
+        &arbitrary("arbitrary.ckpt"),
+        "--config",
+        &arbitrary("config.yaml"),
+        "--predictor-checkpoint",
+        &tiny("tiny.ckpt"),
+        "--out",
+        &p(&other),
+    ]);
+    let said = text(&o);
+    assert!(!o.status.success(), "{said}");
+    assert!(
+        said.contains("tiny.ckpt") && said.contains("nothing was written"),
+        "{said}"
+    );
+    assert!(!other.join("arbitrary.json").exists());
+
+    // the predictor's own configuration is not a model to import
+    let predictor_yaml = dir.path().join("predictor.yaml");
+    std::fs::write(
+        &predictor_yaml,
+        "model:\n  type: eigenvecs_predictor\n  model_type: PoissonNet\n",
+    )
+    .unwrap();
+    let o = mfm(&[
+        "import",
+        "--checkpoint",
+        &arbitrary("predictor.ckpt"),
+        "--config",
+        &p(&predictor_yaml),
+        "--out",
+        &p(&other),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("--predictor-checkpoint") && text(&o).contains("predictor.yaml"),
+        "{}",
+        text(&o)
+    );
+
+    // a single-source model still needs its template
+    let o = mfm(&[
+        "import",
+        "--checkpoint",
+        &tiny("tiny.ckpt"),
+        "--config",
+        &tiny("config.yaml"),
+        "--out",
+        &p(&other),
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("--mesh"), "{}", text(&o));
+}

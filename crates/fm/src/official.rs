@@ -37,8 +37,11 @@
 //! methods. Dropout and drop-path act only in training and are ignored.
 //! `use_source_xyz_grad` has no effect in the official network (its
 //! argument is never read) and is accepted either way.
-//! The arbitrary-source model (`type: Matern_FM_arbitrary_source`) and its
-//! eigenvector predictor are not imported yet.
+//! The arbitrary-source model (`type: Matern_FM_arbitrary_source`, the flow
+//! with its eigenvector predictor) is imported by `mfm_arbitrary::official`
+//! (which this crate does not depend on) with the readers made public here:
+//! [`OfficialCheckpoint`], [`x0_noise`], [`ode_steps`],
+//! [`check_extra_configs`], [`check_finite`].
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -185,7 +188,9 @@ pub struct OfficialConfig {
     pub ode: Option<OfficialOde>,
 }
 
-fn config_error(path: &Path, message: impl std::fmt::Display) -> FmError {
+/// The error for what an official configuration file `path` holds:
+/// [`FmError::Files`] naming the file, "official configuration: `message`".
+pub fn config_error(path: &Path, message: impl std::fmt::Display) -> FmError {
     FmError::format(path, format!("official configuration: {message}"))
 }
 
@@ -215,12 +220,24 @@ impl OfficialConfig {
         let kind = model.get("type").and_then(|v| v.as_str()).unwrap_or("");
         match kind {
             "Matern_FM" => {}
-            "Matern_FM_arbitrary_source" | "eigenvecs_predictor" => {
+            "Matern_FM_arbitrary_source" => {
                 return Err(config_error(
                     path,
                     format!(
-                        "model.type {kind}: importing the arbitrary-source model and its eigenvector \
-                         predictor is not supported yet (only the single-source Matern_FM model)"
+                        "model.type {kind}: an arbitrary-source model, which this single-source \
+                         reader does not take; `mfm import` routes it to the arbitrary-source \
+                         importer (mfm_arbitrary::official)"
+                    ),
+                ));
+            }
+            "eigenvecs_predictor" => {
+                return Err(config_error(
+                    path,
+                    format!(
+                        "model.type {kind}: an eigenvector predictor alone generates nothing; import \
+                         the arbitrary-source flow's checkpoint (its configuration has model.type \
+                         Matern_FM_arbitrary_source), which holds the predictor, and pass this one \
+                         as --predictor-checkpoint to cross-check it"
                     ),
                 ));
             }
@@ -286,28 +303,7 @@ impl OfficialConfig {
         if m.hidden_dim == 0 || m.num_blocks == 0 {
             return fail("model.hidden_dim and num_blocks must be positive".into());
         }
-        let e = &m.extra_configs;
-        for (name, on) in [
-            ("mlp_norm", e.mlp_norm),
-            ("inner_prod_features", e.inner_prod_features),
-            ("mass_norm", e.mass_norm),
-        ] {
-            if on == Some(true) {
-                return fail(format!(
-                    "model.extra_configs.{name}: True is not implemented in mfm (only False)"
-                ));
-            }
-        }
-        if e.cmlp_modulate.is_none() {
-            return fail(
-                "model.extra_configs.cmlp_modulate must be given: the official code defaults it to True \
-                 in the blocks and False in the NJF head, which mfm's one switch cannot express"
-                    .into(),
-            );
-        }
-        if e.cmlp_nlayers == Some(0) {
-            return fail("model.extra_configs.cmlp_nlayers must be at least 1".into());
-        }
+        check_extra_configs(&self.path, "model.extra_configs", &m.extra_configs)?;
         self.cond_columns()?;
         self.noise()?;
         self.sample_steps()?;
@@ -356,65 +352,12 @@ impl OfficialConfig {
 
     /// The noise kind and scale.
     fn noise(&self) -> Result<(NoiseKind, f64)> {
-        let x0 = self.model.x0_dist.clone().unwrap_or(OfficialX0 {
-            kind: "poisson_solve".into(),
-            sigma: 1.0,
-            screened_solver_for_x0: false,
-            screening_term: 1.0,
-        });
-        if x0.kind != "poisson_solve" {
-            return Err(config_error(
-                &self.path,
-                format!("model.x0_dist.type {:?}: expected poisson_solve", x0.kind),
-            ));
-        }
-        if !(x0.sigma.is_finite() && x0.sigma > 0.0) {
-            return Err(config_error(
-                &self.path,
-                format!("model.x0_dist.sigma {}: must be positive", x0.sigma),
-            ));
-        }
-        let tau = if x0.screened_solver_for_x0 {
-            x0.screening_term
-        } else {
-            0.0
-        };
-        if !(tau.is_finite() && tau >= 0.0) {
-            return Err(config_error(
-                &self.path,
-                format!("model.x0_dist.screening_term {tau}: must be >= 0"),
-            ));
-        }
-        Ok((NoiseKind::Matern { tau }, x0.sigma))
+        x0_noise(&self.path, self.model.x0_dist.as_ref())
     }
 
     /// ODE steps and method.
     fn sample_steps(&self) -> Result<(usize, OdeMethod)> {
-        let Some(ode) = &self.ode else {
-            return Ok((20, OdeMethod::Midpoint));
-        };
-        let method = match ode.method.as_str() {
-            "midpoint" => OdeMethod::Midpoint,
-            "euler" => OdeMethod::Euler,
-            other => {
-                return Err(config_error(
-                    &self.path,
-                    format!("ode_solver.method {other:?}: mfm integrates with midpoint or euler"),
-                ));
-            }
-        };
-        let steps = 1.0 / ode.step_size;
-        let rounded = steps.round();
-        if !(ode.step_size > 0.0 && rounded >= 1.0 && (steps - rounded).abs() < 1e-6 * rounded) {
-            return Err(config_error(
-                &self.path,
-                format!(
-                    "ode_solver.step_size {}: must be 1 / (a whole number of steps)",
-                    ode.step_size
-                ),
-            ));
-        }
-        Ok((rounded as usize, method))
+        ode_steps(&self.path, self.ode.as_ref())
     }
 
     /// The flow spec of the imported run on the template `mesh`.
@@ -467,6 +410,123 @@ impl OfficialConfig {
     }
 }
 
+/// Checks the block options `e` of an official configuration (`at`: where
+/// they are in the file, e.g. `model.extra_configs`): refuses `mlp_norm`,
+/// `inner_prod_features` and `mass_norm` set to True (not implemented in
+/// mfm), an absent `cmlp_modulate` (the official code's defaults differ
+/// between the blocks and the NJF head, which mfm's one switch cannot
+/// express) and `cmlp_nlayers: 0`.
+///
+/// # Errors
+/// [`FmError::Files`] naming the file `path` and the option.
+pub fn check_extra_configs(path: &Path, at: &str, e: &OfficialExtraConfigs) -> Result<()> {
+    for (name, on) in [
+        ("mlp_norm", e.mlp_norm),
+        ("inner_prod_features", e.inner_prod_features),
+        ("mass_norm", e.mass_norm),
+    ] {
+        if on == Some(true) {
+            return Err(config_error(
+                path,
+                format!("{at}.{name}: True is not implemented in mfm (only False)"),
+            ));
+        }
+    }
+    if e.cmlp_modulate.is_none() {
+        return Err(config_error(
+            path,
+            format!(
+                "{at}.cmlp_modulate must be given: the official code defaults it to True \
+                 in the blocks and False in the NJF head, which mfm's one switch cannot express"
+            ),
+        ));
+    }
+    if e.cmlp_nlayers == Some(0) {
+        return Err(config_error(
+            path,
+            format!("{at}.cmlp_nlayers must be at least 1"),
+        ));
+    }
+    Ok(())
+}
+
+/// The noise kind and scale of an official `model.x0_dist` (`None`: the
+/// official default, an unscreened solve of sigma 1): a screened solve
+/// with `screening_term` tau maps to `matern:tau`, an unscreened one to
+/// `matern:0`; the scale is `sigma`.
+///
+/// # Errors
+/// [`FmError::Files`] naming the file `path` and the option: another
+/// `type` than `poisson_solve`, a `sigma` that is not positive, a negative
+/// or non-finite `screening_term`.
+pub fn x0_noise(path: &Path, x0: Option<&OfficialX0>) -> Result<(NoiseKind, f64)> {
+    let x0 = x0.cloned().unwrap_or(OfficialX0 {
+        kind: "poisson_solve".into(),
+        sigma: 1.0,
+        screened_solver_for_x0: false,
+        screening_term: 1.0,
+    });
+    if x0.kind != "poisson_solve" {
+        return Err(config_error(
+            path,
+            format!("model.x0_dist.type {:?}: expected poisson_solve", x0.kind),
+        ));
+    }
+    if !(x0.sigma.is_finite() && x0.sigma > 0.0) {
+        return Err(config_error(
+            path,
+            format!("model.x0_dist.sigma {}: must be positive", x0.sigma),
+        ));
+    }
+    let tau = if x0.screened_solver_for_x0 {
+        x0.screening_term
+    } else {
+        0.0
+    };
+    if !(tau.is_finite() && tau >= 0.0) {
+        return Err(config_error(
+            path,
+            format!("model.x0_dist.screening_term {tau}: must be >= 0"),
+        ));
+    }
+    Ok((NoiseKind::Matern { tau }, x0.sigma))
+}
+
+/// The steps and method of an official `ode_solver` section (`None`: 20
+/// midpoint steps, the paper's); `step_size` must be `1 / n` for a whole
+/// `n`.
+///
+/// # Errors
+/// [`FmError::Files`] naming the file `path` and the option: a method
+/// other than `midpoint` or `euler`, a step size that is not `1 / n`.
+pub fn ode_steps(path: &Path, ode: Option<&OfficialOde>) -> Result<(usize, OdeMethod)> {
+    let Some(ode) = ode else {
+        return Ok((20, OdeMethod::Midpoint));
+    };
+    let method = match ode.method.as_str() {
+        "midpoint" => OdeMethod::Midpoint,
+        "euler" => OdeMethod::Euler,
+        other => {
+            return Err(config_error(
+                path,
+                format!("ode_solver.method {other:?}: mfm integrates with midpoint or euler"),
+            ));
+        }
+    };
+    let steps = 1.0 / ode.step_size;
+    let rounded = steps.round();
+    if !(ode.step_size > 0.0 && rounded >= 1.0 && (steps - rounded).abs() < 1e-6 * rounded) {
+        return Err(config_error(
+            path,
+            format!(
+                "ode_solver.step_size {}: must be 1 / (a whole number of steps)",
+                ode.step_size
+            ),
+        ));
+    }
+    Ok((rounded as usize, method))
+}
+
 /// `import.json` of an imported run: where it came from.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -489,67 +549,124 @@ pub struct ImportRecord {
     pub ignored_entries: Vec<String>,
 }
 
-/// The weights of an official checkpoint: the `state_dict` of a Lightning
-/// checkpoint, or the whole file when it is a state dict itself; the
-/// parameters' prefix (`base_model.` or none) and the ignored entries.
-fn official_tensors(
-    ckpt: &mut Checkpoint,
-) -> Result<(HashMap<String, OfficialTensor>, String, Vec<String>)> {
-    let path = ckpt.path().to_path_buf();
-    let root = ckpt.root().clone();
-    let top_keys = |v: &Value| -> Vec<String> {
-        match v {
-            Value::Dict(items) => items
+/// The tensors of an official checkpoint file, read without Python: the
+/// `state_dict` of a Lightning checkpoint, or the whole file when it is a
+/// state dict itself, with the Lightning entries that were not read.
+#[derive(Clone, Debug)]
+pub struct OfficialCheckpoint {
+    path: PathBuf,
+    entries: Vec<(String, TensorData)>,
+    lightning: bool,
+    ignored_entries: Vec<String>,
+    global_step: Option<i64>,
+}
+
+impl OfficialCheckpoint {
+    /// Reads the checkpoint at `path` (only tensors and plain containers;
+    /// a file holding other pickled objects is refused).
+    ///
+    /// # Errors
+    /// [`FmError::Files`] naming the file: unreadable, not a `torch.save`
+    /// archive, objects other than tensors and containers, no state dict.
+    pub fn open(path: &Path) -> Result<Self> {
+        let fail = |e: mfm_torchfile::TorchFileError| FmError::format(path, e.to_string());
+        let mut ckpt = Checkpoint::open(path).map_err(fail)?;
+        let root = ckpt.root().clone();
+        let global_step = match root.get("global_step") {
+            Some(Value::Int(s)) => Some(*s),
+            _ => None,
+        };
+        let lightning = root.get("state_dict").is_some();
+        let ignored_entries = match (&root, lightning) {
+            (Value::Dict(items), true) => items
                 .iter()
                 .filter_map(|(k, _)| match k {
-                    Value::Str(s) => Some(s.clone()),
+                    Value::Str(s) if s != "state_dict" => Some(s.clone()),
                     _ => None,
                 })
                 .collect(),
             _ => Vec::new(),
-        }
-    };
-    let lightning = root.get("state_dict").is_some();
-    let (entry, ignored) = if lightning {
-        let ignored = top_keys(&root)
-            .into_iter()
-            .filter(|k| k != "state_dict")
-            .collect();
-        ("state_dict", ignored)
-    } else {
-        ("", Vec::new())
-    };
-    let fail = |e: mfm_torchfile::TorchFileError| FmError::format(&path, e.to_string());
-    let tensors = ckpt.state_dict(entry).map_err(fail)?;
-    let prefix = if tensors.iter().any(|(n, _)| n.starts_with(OFFICIAL_PREFIX)) {
-        OFFICIAL_PREFIX.to_string()
-    } else {
-        String::new()
-    };
-    let mut out = HashMap::with_capacity(tensors.len());
-    for (name, t) in tensors {
-        if !name.starts_with(&prefix) {
-            continue;
-        }
-        let values = t.to_f32().ok_or_else(|| {
-            FmError::format(
-                &path,
-                format!(
-                    "entry {}{name} is a {} tensor, not floating point",
-                    if lightning { "state_dict." } else { "" },
-                    t.dtype
-                ),
-            )
-        })?;
-        out.insert(
-            name,
-            OfficialTensor {
-                shape: t.shape,
-                values,
-            },
-        );
+        };
+        let entry = if lightning { "state_dict" } else { "" };
+        let entries = ckpt.state_dict(entry).map_err(fail)?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            entries,
+            lightning,
+            ignored_entries,
+            global_step,
+        })
     }
-    Ok((out, prefix, ignored))
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Every tensor's name, in the file's order.
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.entries.iter().map(|(n, _)| n.as_str())
+    }
+
+    /// `global_step` of a Lightning checkpoint.
+    pub fn global_step(&self) -> Option<i64> {
+        self.global_step
+    }
+
+    /// The top-level entries of a Lightning checkpoint other than its
+    /// `state_dict` (optimizer and loop states...), which are not read.
+    pub fn ignored_entries(&self) -> &[String] {
+        &self.ignored_entries
+    }
+
+    /// The tensors whose names start with `prefix` (names kept whole), as
+    /// `f32`.
+    ///
+    /// # Errors
+    /// [`FmError::Files`] naming the file and the tensor for one that is
+    /// not floating point.
+    pub fn tensors(&self, prefix: &str) -> Result<HashMap<String, OfficialTensor>> {
+        let mut out = HashMap::new();
+        for (name, t) in self.entries.iter().filter(|(n, _)| n.starts_with(prefix)) {
+            let values = t.to_f32().ok_or_else(|| {
+                FmError::format(
+                    &self.path,
+                    format!(
+                        "entry {}{name} is a {} tensor, not floating point",
+                        if self.lightning { "state_dict." } else { "" },
+                        t.dtype
+                    ),
+                )
+            })?;
+            out.insert(
+                name.clone(),
+                OfficialTensor {
+                    shape: t.shape.clone(),
+                    values,
+                },
+            );
+        }
+        Ok(out)
+    }
+}
+
+/// Refuses official weights `tensors` of the file `source` holding a
+/// non-finite value, naming the parameter.
+///
+/// # Errors
+/// [`FmError::Diverged`] naming the file and the parameter.
+pub fn check_finite(tensors: &HashMap<String, OfficialTensor>, source: &Path) -> Result<()> {
+    let mut names: Vec<&String> = tensors.keys().collect();
+    names.sort();
+    for name in names {
+        if let Some(bad) = tensors[name].values.iter().find(|v| !v.is_finite()) {
+            return Err(FmError::Diverged(format!(
+                "{}: parameter {name} holds {bad}: the checkpoint's weights are not finite",
+                source.display()
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// Imports the official checkpoint `checkpoint` with its YAML `config`
@@ -573,33 +690,26 @@ pub fn import_official(
     let config = OfficialConfig::read(config_path)?;
     let flow = config.flow_spec(template)?;
     let run_config = config.run_config()?;
-    let mut ckpt = Checkpoint::open(checkpoint_path)
-        .map_err(|e| FmError::format(checkpoint_path, e.to_string()))?;
-    let global_step = match ckpt.root().get("global_step") {
-        Some(Value::Int(s)) => Some(*s),
-        _ => None,
+    let ckpt = OfficialCheckpoint::open(checkpoint_path)?;
+    let prefix = if ckpt.names().any(|n| n.starts_with(OFFICIAL_PREFIX)) {
+        OFFICIAL_PREFIX
+    } else {
+        ""
     };
-    let (tensors, prefix, ignored_entries) = official_tensors(&mut ckpt)?;
+    let tensors = ckpt.tensors(prefix)?;
     let net_config = config.net_config();
     let mut net = PoissonNet::new(&net_config, tch::Device::Cpu)?;
     let (_, columns) = config.cond_columns()?;
-    load_official(&mut net, &tensors, &prefix, &columns, checkpoint_path)?;
-    for (name, t) in &tensors {
-        if let Some(bad) = t.values.iter().find(|v| !v.is_finite()) {
-            return Err(FmError::Diverged(format!(
-                "{}: parameter {name} holds {bad}: the checkpoint's weights are not finite",
-                checkpoint_path.display()
-            )));
-        }
-    }
+    load_official(&mut net, &tensors, prefix, &columns, checkpoint_path)?;
+    check_finite(&tensors, checkpoint_path)?;
     let record = ImportRecord {
         checkpoint: checkpoint_path.to_path_buf(),
         checkpoint_record: checkpoint::file_record(checkpoint_path)?,
         config: config_path.to_path_buf(),
         template: template_path.to_path_buf(),
-        global_step,
+        global_step: ckpt.global_step(),
         parameters: net.num_parameters(),
-        ignored_entries,
+        ignored_entries: ckpt.ignored_entries().to_vec(),
     };
     let undo = mfm_files::Undo::empty_folder(out)?;
     net.save(out.join(WEIGHTS_FILE))?;

@@ -22,7 +22,7 @@
 //!    prediction (`model.prediction = "clean"`, the output read as `f_1`)
 //!    the same loss of `v = (out - f_t) / (1 - t)`, i.e. `|out - f_1|^2 /
 //!    (1 - t)^2` with the weight clipped at
-//!    [`CLEAN_WEIGHT_MAX`](crate::config::CLEAN_WEIGHT_MAX);
+//!    [`CLEAN_WEIGHT_MAX`];
 //! 6. backward, clip the global gradient norm, one [`Adam`] step at the
 //!    scheduled learning rate, then (with `train.ema`) the weight average
 //!    moves towards the new weights. Everything is `f32`.

@@ -46,9 +46,11 @@ fn tiny(steps: u64) -> RunConfig {
     c.train.seed = 5;
     c.train.threads = 1;
     c.train.device = DeviceChoice::Cpu;
-    // the official loss and no average, whatever the preset's defaults
+    // the official loss, uniform times and no average, whatever the
+    // preset's defaults
     c.train.ema = 0.0;
     c.train.jacobian_weight = 1.0;
+    c.train.time = TimeSampling::Uniform;
     c
 }
 
