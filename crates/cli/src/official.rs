@@ -92,13 +92,7 @@ pub fn import(a: ImportArgs) -> Result<()> {
         );
     };
     let mesh = load_mesh_checked(&mesh_name)?;
-    let _lock = crate::output::lock_folder(&a.out)?;
-    crate::output::ensure_empty(&a.out).with_context(|| {
-        format!(
-            "mfm import writes a new run folder ({})",
-            IMPORTED_FILES.join(", ")
-        )
-    })?;
+    let _lock = claim_run_folder(&a.out, &IMPORTED_FILES)?;
     let record = import_official(
         &a.checkpoint,
         &a.config,
@@ -137,6 +131,15 @@ pub fn import(a: ImportArgs) -> Result<()> {
     Ok(())
 }
 
+/// Locks `out` and checks it is missing or empty: `mfm import` writes a
+/// new run folder of `files`. The lock is held while the guard lives.
+fn claim_run_folder(out: &std::path::Path, files: &[&str]) -> Result<mfm_files::FolderLock> {
+    let lock = crate::output::lock_folder(out)?;
+    crate::output::ensure_empty(out)
+        .with_context(|| format!("mfm import writes a new run folder ({})", files.join(", ")))?;
+    Ok(lock)
+}
+
 /// `mfm import` of an arbitrary-source model
 /// ([`mfm_arbitrary::official`]).
 fn import_arbitrary(a: ImportArgs) -> Result<()> {
@@ -144,13 +147,7 @@ fn import_arbitrary(a: ImportArgs) -> Result<()> {
         Some(name) => Some((load_mesh_checked(name)?, PathBuf::from(name))),
         None => None,
     };
-    let _lock = crate::output::lock_folder(&a.out)?;
-    crate::output::ensure_empty(&a.out).with_context(|| {
-        format!(
-            "mfm import writes a new run folder ({})",
-            ARBITRARY_FILES.join(", ")
-        )
-    })?;
+    let _lock = claim_run_folder(&a.out, &ARBITRARY_FILES)?;
     let record = import_official_arbitrary(
         &a.checkpoint,
         &a.config,
