@@ -12,6 +12,8 @@
 //! - `bench noise`: Matérn sampling, ours against CHOLMOD and cholespy, in one run.
 //! - `bench net`: PoissonNet training steps and inference at the three presets, in
 //!   interleaved rounds (optionally against a baseline `mfm`), next to the reference times.
+//! - `bench import`: `mfm dataset import` of many shapes, seconds and peak
+//!   memory.
 //! - `reproduce-figures gmm`: the paper's GMM table at CPU scale (noise
 //!   kinds compared on a non-uniform test mesh).
 //! - `reproduce-figures deform`: the paper's deformation experiments at CPU
@@ -19,12 +21,15 @@
 //! - `reproduce-figures spectral`: the paper's noise figures (per-frequency
 //!   statistics, spectrum, fixed vs normalized tau, noise on a non-uniform
 //!   triangulation) and the numbers behind them, from scratch.
+//! - `reproduce-figures own`: the own-data path (import, train, sample on a
+//!   finer mesh, evaluate without a generator) on folders of shapes.
 //! - `mfm ARGS...`: build the release `mfm` with the project's libtorch and
 //!   run it.
 //! - `visual-check DIR`: PNG contact sheets of the PLY files under DIR,
 //!   rendered offscreen with pyvista.
 
 mod bench;
+mod bench_import;
 mod bench_net;
 mod bench_noise;
 mod demo;
@@ -32,6 +37,7 @@ mod figures;
 mod figures_arbitrary;
 mod figures_deform;
 mod figures_gmm;
+mod figures_own;
 mod flow_steps;
 mod no_network;
 mod pretrain;
@@ -136,6 +142,11 @@ enum FiguresCmd {
     /// flow, evaluated on unseen shapes of the template and of another
     /// triangulation (and on another object).
     Arbitrary(figures_arbitrary::ArbitraryArgs),
+    /// Your own shapes, the path of the README's "Train on your own
+    /// shapes": import a folder (default: the shared real sequences),
+    /// train, sample on a finer mesh, evaluate without a generator; a
+    /// report with pictures.
+    Own(figures_own::OwnArgs),
 }
 
 #[derive(Subcommand)]
@@ -219,6 +230,9 @@ enum BenchCmd {
         #[arg(long)]
         baseline: Option<PathBuf>,
     },
+    /// `mfm dataset import` of many shapes: seconds and peak memory for a
+    /// folder of mesh files and for one .npy array of the same shapes.
+    Import(bench_import::ImportBenchArgs),
 }
 
 /// The workspace root (parent of this crate's folder).
@@ -398,6 +412,10 @@ fn main() -> Result<()> {
                 &bench_net::output_dir(),
             )
         }
+        Cmd::Bench(BenchCmd::Import(args)) => {
+            let env = pyenv::ensure()?;
+            bench_import::import(&env, &args)
+        }
         Cmd::ReproduceFigures(FiguresCmd::Spectral(args)) => figures::spectral(&args),
         Cmd::ReproduceFigures(FiguresCmd::Gmm(args)) => {
             let env = pyenv::ensure()?;
@@ -410,6 +428,10 @@ fn main() -> Result<()> {
         Cmd::ReproduceFigures(FiguresCmd::Arbitrary(args)) => {
             let env = pyenv::ensure()?;
             figures_arbitrary::arbitrary(&env, &args)
+        }
+        Cmd::ReproduceFigures(FiguresCmd::Own(args)) => {
+            let env = pyenv::ensure()?;
+            figures_own::own(&env, &args)
         }
         Cmd::Mfm { args } => {
             let env = pyenv::ensure()?;

@@ -46,6 +46,67 @@ pub enum DatasetCommand {
     /// OUT/pair_space.json and OUT/preview.png; each dataset folder has
     /// params.json with every shape's and pose's parameters.
     Pairs(PairsArgs),
+    /// Your own data: shapes of one connectivity (mesh files, or folders of
+    /// them in natural order: 2.obj before 10.obj), per-vertex signals
+    /// (--signals X.npy --mesh T, or PLY vertex properties with
+    /// --property), or the authors' dataset file (a .pt with src_verts,
+    /// tar_verts, faces). Writes OUT/train (a dataset folder on the
+    /// template that `mfm train` uses as it is) and, with --holdout,
+    /// OUT/holdout (held-out signals on the template), OUT/reference (the
+    /// same on another triangulation of its surface) and OUT/transfer.npy;
+    /// OUT/import.json (what was read, the split, warnings) and
+    /// OUT/preview.png. Signals stay in your units and place.
+    Import(ImportArgs),
+}
+
+/// Arguments of `mfm dataset import`.
+#[derive(Args)]
+pub struct ImportArgs {
+    /// Output folder (must not exist or be empty).
+    #[arg(long)]
+    out: PathBuf,
+    /// Mesh files (OBJ, OFF, PLY, glTF/GLB), folders of them, or one
+    /// authors' dataset file (.pt): every mesh one shape, all of the
+    /// template's connectivity.
+    #[arg(required_unless_present = "signals")]
+    inputs: Vec<PathBuf>,
+    /// The rest shape every input must match (vertex count and faces);
+    /// default: the first input.
+    #[arg(long, conflicts_with = "signals")]
+    template: Option<PathBuf>,
+    /// Held-out signals: a count (8), a percentage (12.5%) drawn with
+    /// --seed, or every:K (inputs K-1, 2K-1, ...: every K-th frame of a
+    /// sequence). Default: none.
+    #[arg(long)]
+    holdout: Option<String>,
+    /// The reference mesh for the held-out signals: another triangulation
+    /// of the template's surface, in its units and place (each vertex is
+    /// located on the template by closest point). Default: the template
+    /// with its x < centroid half refined twice.
+    #[arg(long, requires = "holdout")]
+    reference_mesh: Option<PathBuf>,
+    /// A NumPy array [N, V] or [N, V, C] (float32/float64) of per-vertex
+    /// signals on --mesh.
+    #[arg(long, requires = "mesh", conflicts_with = "inputs")]
+    signals: Option<PathBuf>,
+    /// The mesh --signals lives on.
+    #[arg(long, requires = "signals")]
+    mesh: Option<String>,
+    /// Read this PLY vertex property of every input as a signal channel
+    /// instead of the positions (repeatable, in channel order).
+    #[arg(long = "property")]
+    properties: Vec<String>,
+    /// With --signals: the 3 channels are values (colours...), not vertex
+    /// positions.
+    #[arg(long)]
+    values: bool,
+    /// Refuse input folders holding anything but mesh files (default:
+    /// skip it, with a count).
+    #[arg(long)]
+    strict: bool,
+    /// Seed of the held-out draw.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
 }
 
 /// What `mfm dataset deform` and `mfm dataset pairs` share: the pose
@@ -188,6 +249,7 @@ pub fn dataset(cmd: DatasetCommand) -> Result<()> {
         DatasetCommand::Gmm(a) => dataset_gmm(a),
         DatasetCommand::Deform(a) => dataset_deform(a),
         DatasetCommand::Pairs(a) => dataset_pairs(a),
+        DatasetCommand::Import(a) => dataset_import(a),
     }
 }
 
@@ -389,4 +451,142 @@ fn with_areas(
         );
     }
     Ok(mesh)
+}
+
+/// Runs `mfm dataset import`.
+fn dataset_import(a: ImportArgs) -> Result<()> {
+    use mfm_data::import::authors::read_authors_dataset;
+    use mfm_data::import::inputs::list_mesh_files;
+    use mfm_data::import::sources::{MeshFiles, NpyRows};
+    use mfm_data::import::{Holdout, ImportExperiment, SignalFiles};
+    let holdout: Holdout = match &a.holdout {
+        Some(h) => h.parse()?,
+        None => Holdout::None,
+    };
+    let is_torch = |p: &Path| {
+        p.extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("pt") || e.eq_ignore_ascii_case("pth"))
+    };
+    let mut inputs_read: Vec<PathBuf> = a.inputs.clone();
+    inputs_read.extend(a.template.clone());
+    inputs_read.extend(a.signals.clone());
+    inputs_read.extend(a.reference_mesh.clone());
+    inputs_read.extend(
+        a.mesh
+            .as_deref()
+            .and_then(crate::mesh::mesh_path)
+            .map(Path::to_path_buf),
+    );
+    mfm_files::Outputs::new()
+        .inputs(&inputs_read)
+        .output(&a.out)
+        .check()?;
+    let _lock = crate::output::lock_folder(&a.out)?;
+    ensure_empty(&a.out)?;
+    let mut skipped = 0;
+    let (template, template_name, source): (mfm_geometry::TriMesh, String, Box<dyn SignalFiles>) =
+        if let Some(array) = &a.signals {
+            let spec = a.mesh.clone().unwrap_or_default();
+            let mesh = load_mesh_checked(&spec)?;
+            let rows = NpyRows::open(array, false)?;
+            let positions = rows.channels() == 3 && !a.values;
+            let rows = NpyRows::open(array, positions)?;
+            if rows.num_vertices() != mesh.num_vertices() {
+                bail!(
+                    "{}: rows have {} vertices, but --mesh {spec} has {}",
+                    array.display(),
+                    rows.num_vertices(),
+                    mesh.num_vertices()
+                );
+            }
+            (mesh, spec, Box::new(rows))
+        } else if a.inputs.len() == 1 && is_torch(&a.inputs[0]) {
+            let path = &a.inputs[0];
+            if !a.properties.is_empty() {
+                bail!(
+                    "--property reads PLY files; {} is a torch file",
+                    path.display()
+                );
+            }
+            let data = read_authors_dataset(path)?;
+            if data.sources.is_some() {
+                bail!(
+                    "{}: src_verts holds one source per target (the authors' arbitrary-source \
+                     format); mfm's arbitrary-source training reads pose pairs of `mfm dataset \
+                     pairs` and cannot take these pairs yet. A single-source file has src_verts \
+                     [V, 3].",
+                    path.display()
+                );
+            }
+            let name = format!("{}:src_verts", path.display());
+            (data.template, name, Box::new(data.targets))
+        } else {
+            if let Some(p) = a.inputs.iter().find(|p| is_torch(p)) {
+                bail!(
+                    "{}: an authors' dataset file is imported alone (one .pt input)",
+                    p.display()
+                );
+            }
+            let list = list_mesh_files(&a.inputs, a.strict)?;
+            skipped = list.skipped.len();
+            if skipped > 0 {
+                eprintln!(
+                    "warning: skipped {skipped} entr{} of the input folders that are not mesh files \
+                     (first: {}; --strict refuses them)",
+                    if skipped == 1 { "y" } else { "ies" },
+                    list.skipped[0].display()
+                );
+            }
+            let template_path = a.template.clone().unwrap_or_else(|| list.files[0].clone());
+            let spec = template_path.display().to_string();
+            let template = load_mesh_checked(&spec)?;
+            let files = MeshFiles {
+                files: list.files,
+                properties: a.properties.clone(),
+            };
+            (template, spec, Box::new(files))
+        };
+    let reference = match &a.reference_mesh {
+        Some(p) => {
+            let spec = p.display().to_string();
+            Some((load_mesh_checked(&spec)?, spec))
+        }
+        None => None,
+    };
+    println!(
+        "template {template_name}: {} vertices, {} faces; {} signal{} of {} channel{}",
+        template.num_vertices(),
+        template.num_faces(),
+        source.len(),
+        if source.len() == 1 { "" } else { "s" },
+        source.channels(),
+        if source.channels() == 1 { "" } else { "s" }
+    );
+    let summary = ImportExperiment {
+        source: source.as_ref(),
+        template: &template,
+        template_name: &template_name,
+        holdout,
+        reference_mesh: reference.as_ref().map(|(m, s)| (m, s.as_str())),
+        seed: a.seed,
+        skipped,
+        progress: true,
+    }
+    .write(&a.out)
+    .with_context(|| format!("importing into {}", a.out.display()))?;
+    for w in &summary.warnings {
+        eprintln!("warning: {w}");
+    }
+    if let (Some([v, f]), Some(name)) = (summary.reference_size, &summary.reference_mesh) {
+        println!("reference mesh ({name}): {v} vertices, {f} faces");
+    }
+    println!(
+        "wrote {} ({} training, {} held out) in {:.1} s",
+        a.out.display(),
+        summary.train,
+        summary.held_out,
+        summary.seconds
+    );
+    Ok(())
 }

@@ -14,7 +14,11 @@ pub struct EvalArgs {
     /// Generated samples (.npy [N, V, C], e.g. from `mfm sample`).
     #[arg(long)]
     samples: PathBuf,
-    /// Reference dataset folder (its mesh is the mesh the samples live on).
+    /// Reference dataset folder (its mesh is the mesh the samples live on),
+    /// or an experiment folder (its reference/ set). For shapes imported
+    /// with `mfm dataset import`, adds the measures that need no generator:
+    /// plausibility, coverage, novelty, roughness and flipped faces against
+    /// the training and held-out shapes.
     #[arg(long, required_unless_present = "space")]
     reference: Option<PathBuf>,
     /// Without a reference set: the space.json of `mfm dataset deform`; only
@@ -29,7 +33,9 @@ pub struct EvalArgs {
     out: Option<PathBuf>,
     /// Render the point-wise means (generated vs reference) to this PNG; for
     /// a deformation reference set (`mfm dataset deform`), the first
-    /// generated shapes beside their projections onto the deformation space.
+    /// generated shapes beside their projections onto the deformation space;
+    /// for imported shapes, the first samples beside their nearest real
+    /// shapes.
     #[arg(long)]
     png: Option<PathBuf>,
 }

@@ -43,14 +43,13 @@
 //! ```
 
 use std::fs::File;
-use std::io::{self, BufReader, BufWriter, Read, Seek, SeekFrom, Write};
+use std::io::{self, BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use mfm_geometry::TriMesh;
 use mfm_geometry::frame::CanonicalFrame;
 use mfm_meshio::{read_mesh, write_ply};
-use npyz::WriterBuilder;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{DataError, Result};
@@ -593,41 +592,187 @@ fn write_files(
     manifest: &Manifest,
 ) -> Result<()> {
     write_ply(dir.join(MESH_FILE), mesh, &[])?;
-
-    let path = dir.join(SIGNALS_FILE);
-    let io_err = |e| DataError::io(&path, e);
-    let file = File::create(&path).map_err(io_err)?;
-    let dtype = npyz::DType::Plain(
-        DTYPE
-            .parse()
-            .map_err(|e| DataError::format(&path, format!("internal dtype {DTYPE}: {e}")))?,
-    );
     let shape = [
         signals.len() as u64,
         signals.num_vertices() as u64,
         signals.channels() as u64,
     ];
-    let mut writer = npyz::WriteOptions::<f32>::new()
-        .dtype(dtype)
-        .shape(&shape)
-        .writer(BufWriter::new(&file))
-        .begin_nd()
-        .map_err(io_err)?;
-    writer
-        .extend(signals.data().iter().copied())
-        .map_err(io_err)?;
-    writer.finish().map_err(io_err)?;
-    file.sync_all().map_err(io_err)?;
+    let mut stream = mfm_files::npy::NpyStream::<f32>::create(dir.join(SIGNALS_FILE), &shape)?;
+    stream.append(signals.data())?;
+    stream.finish()?;
+    write_manifest(dir, manifest)
+}
 
-    let path = dir.join(MANIFEST_FILE);
-    let text = serde_json::to_vec_pretty(manifest)
-        .map_err(|e| DataError::format(&path, format!("cannot serialize the manifest: {e}")))?;
-    let mut file = File::create(&path).map_err(|e| DataError::io(&path, e))?;
-    file.write_all(&text)
-        .and_then(|()| file.write_all(b"\n"))
-        .and_then(|()| file.sync_all())
-        .map_err(|e| DataError::io(&path, e))?;
-    Ok(())
+/// Writes `manifest` as [`MANIFEST_FILE`] in `dir`, atomically.
+fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<()> {
+    Ok(mfm_files::write_json(dir.join(MANIFEST_FILE), manifest)?)
+}
+
+/// A dataset folder written signal by signal, for sets larger than memory
+/// (`mfm dataset import`): the mesh and the `.npy` header first, then the
+/// signals in order, then the manifest; the folder appears at its path
+/// only when [`DatasetWriter::finish`] succeeds.
+///
+/// It is written as a hidden sibling `.NAME.tmp-PID-N` (removed by an
+/// interrupt, see [`mfm_files::interrupt`], by [`Drop`] when the writer is
+/// not finished, and by the next writer when a killed process left it) and
+/// renamed into place.
+///
+/// # Example
+/// ```
+/// use mfm_data::dataset::{Dataset, DatasetWriter, Manifest};
+/// use mfm_data::SignalSource;
+/// use mfm_geometry::procedural;
+/// let dir = tempfile::tempdir().unwrap();
+/// let mesh = procedural::icosphere(1); // 42 vertices
+/// let manifest = Manifest::new("constant", serde_json::json!({}));
+/// let mut w = DatasetWriter::create(dir.path().join("set"), &mesh, manifest, 2, 1).unwrap();
+/// w.append(&[0.5; 42]).unwrap();
+/// w.append(&[1.5; 42]).unwrap();
+/// let ds: Dataset = w.finish().unwrap();
+/// assert_eq!((ds.len(), ds.num_vertices(), ds.channels()), (2, 42, 1));
+/// ```
+#[derive(Debug)]
+pub struct DatasetWriter {
+    dir: PathBuf,
+    temp: PathBuf,
+    signals: Option<mfm_files::npy::NpyStream<f32>>,
+    manifest: Manifest,
+    finished: bool,
+    _registered: mfm_files::interrupt::TemporaryDir,
+}
+
+impl DatasetWriter {
+    /// Starts the dataset `dir` (missing or an empty folder) of `len`
+    /// signals of `channels` values per vertex of `mesh`: writes the mesh
+    /// and the array's header. The manifest's sizes are set here.
+    ///
+    /// # Errors
+    /// [`DataError::Files`] (`Io`) when `dir` exists and is not an empty
+    /// folder, or a file cannot be written; [`DataError::WriteMesh`].
+    pub fn create(
+        dir: impl AsRef<Path>,
+        mesh: &TriMesh,
+        mut manifest: Manifest,
+        len: usize,
+        channels: usize,
+    ) -> Result<Self> {
+        let dir = dir.as_ref().to_path_buf();
+        if inspect_destination(&dir)? == Destination::NonEmpty {
+            return Err(DataError::io(
+                &dir,
+                io::Error::new(
+                    io::ErrorKind::AlreadyExists,
+                    "the folder exists and is not empty; refusing to overwrite it",
+                ),
+            ));
+        }
+        manifest.num_signals = len;
+        manifest.num_vertices = mesh.num_vertices();
+        manifest.channels = channels;
+        let parent = parent_of(&dir);
+        std::fs::create_dir_all(&parent).map_err(|e| DataError::io(&parent, e))?;
+        if let Some(name) = dir.file_name().and_then(|n| n.to_str()) {
+            mfm_files::interrupt::remove_stale_temporaries(&parent, Some(name));
+        }
+        let temp = sibling(&dir, "tmp");
+        std::fs::create_dir(&temp).map_err(|e| DataError::io(&temp, e))?;
+        let registered = mfm_files::interrupt::TemporaryDir::register(&temp);
+        let mut writer = Self {
+            dir,
+            temp,
+            signals: None,
+            manifest,
+            finished: false,
+            _registered: registered,
+        };
+        write_ply(writer.temp.join(MESH_FILE), mesh, &[])?;
+        let shape = [len as u64, mesh.num_vertices() as u64, channels as u64];
+        writer.signals = Some(mfm_files::npy::NpyStream::create(
+            writer.temp.join(SIGNALS_FILE),
+            &shape,
+        )?);
+        Ok(writer)
+    }
+
+    /// Appends whole signals (`V x C` values each, vertex-major), in order.
+    ///
+    /// # Errors
+    /// [`DataError::Files`] (`Format`) for a length that is not a whole
+    /// number of signals or more signals than announced, or a non-finite
+    /// value (naming the signal, vertex and channel); (`Io`) for a failed
+    /// write.
+    pub fn append(&mut self, values: &[f32]) -> Result<()> {
+        let row = self.manifest.num_vertices * self.manifest.channels;
+        let path = self.temp.join(SIGNALS_FILE);
+        if row == 0 || values.len() % row != 0 {
+            return Err(DataError::format(
+                &path,
+                format!(
+                    "{} values are not a whole number of signals of {row}",
+                    values.len()
+                ),
+            ));
+        }
+        let Some(stream) = self.signals.as_mut() else {
+            return Err(DataError::format(&path, "the writer is finished"));
+        };
+        let first = (stream.written() / row as u64) as usize;
+        if let Some((i, vertex, channel, x)) = crate::signals::first_non_finite(
+            values,
+            self.manifest.num_vertices,
+            self.manifest.channels,
+        ) {
+            return Err(DataError::format(
+                &self.dir,
+                format!(
+                    "signal {}, vertex {vertex}, channel {channel} is {x} (a dataset must hold finite values)",
+                    first + i
+                ),
+            ));
+        }
+        Ok(stream.append(values)?)
+    }
+
+    /// Signals appended so far.
+    pub fn written(&self) -> usize {
+        let row = (self.manifest.num_vertices * self.manifest.channels).max(1) as u64;
+        self.signals
+            .as_ref()
+            .map_or(0, |s| (s.written() / row) as usize)
+    }
+
+    /// Commits the array, writes the manifest, moves the folder into place
+    /// and opens it.
+    ///
+    /// # Errors
+    /// [`DataError::Files`] (`Format`) when fewer signals were appended than
+    /// announced; the writing and renaming errors (the temporary folder is
+    /// then removed).
+    pub fn finish(mut self) -> Result<Dataset> {
+        if let Some(stream) = self.signals.take() {
+            stream.finish()?;
+        }
+        write_manifest(&self.temp, &self.manifest)?;
+        if inspect_destination(&self.dir)? == Destination::Empty {
+            std::fs::remove_dir(&self.dir).map_err(|e| DataError::io(&self.dir, e))?;
+        }
+        std::fs::rename(&self.temp, &self.dir).map_err(|e| DataError::io(&self.dir, e))?;
+        self.finished = true;
+        if let Ok(p) = File::open(parent_of(&self.dir)) {
+            let _ = p.sync_all();
+        }
+        Dataset::open(&self.dir)
+    }
+}
+
+impl Drop for DatasetWriter {
+    fn drop(&mut self) {
+        if !self.finished {
+            drop(self.signals.take());
+            let _ = std::fs::remove_dir_all(&self.temp);
+        }
+    }
 }
 
 /// The parts of a `.npy` header a dataset needs.

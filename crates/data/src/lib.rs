@@ -16,10 +16,12 @@ pub mod eigenbasis;
 pub mod error;
 pub mod experiment;
 pub mod gmm;
+pub mod import;
 pub mod layout;
 pub mod pairs;
 pub mod pictures;
 pub mod signals;
+pub mod transfer;
 
 pub use error::{DataError, Result};
 pub use signals::{InMemorySignals, SignalSource};

@@ -21,12 +21,15 @@ use mfm_geometry::operators::Operators;
 use mfm_data::dataset::Dataset;
 use mfm_data::deformations::DeformManifest;
 use mfm_data::gmm::{self, GmmConfig, GmmGenerator};
+use mfm_data::import::{self, ImportManifest};
+use mfm_data::transfer::Transfer;
 use mfm_data::{DataError, InMemorySignals, Result, SignalSource};
 
 use crate::metrics::Metrics;
 use crate::pictures;
 use crate::plausibility::{self, Plausibility};
 use crate::quality::{GmmQualityReport, ParamSpread, Quartiles};
+use crate::shape_quality::{self, ShapeQuality, ShapeSets};
 use std::path::Path;
 
 /// Generated shapes whose projections [`evaluate`] keeps for pictures.
@@ -46,6 +49,11 @@ pub struct EvalReport {
     /// sets only), its fields at the top level.
     #[serde(flatten, default, skip_serializing_if = "Option::is_none")]
     pub shapes: Option<ShapeReport>,
+    /// The generator-free measures of shapes (imported shape sets, which
+    /// have no generator): plausibility, coverage, roughness, novelty and
+    /// flipped faces against the training and held-out shapes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shape_quality: Option<ShapeQuality>,
 }
 
 /// How far generated shapes are from the deformation space, and how much
@@ -86,6 +94,9 @@ impl EvalReport {
         if let Some(q) = &self.quality {
             lines.push(q.summary());
         }
+        if let Some(q) = &self.shape_quality {
+            lines.push(q.summary());
+        }
         if let Some(s) = &self.shapes {
             let q = s.projection_mse_quartiles;
             lines.push(format!(
@@ -119,6 +130,41 @@ pub struct Evaluation {
     /// The generated shapes' projections (the first [`PROJECTIONS_KEPT`]
     /// kept), for deformation reference sets.
     pub projections: Option<Plausibility>,
+    /// For imported shape sets: the training shapes carried to the
+    /// reference mesh, with the template's diagonal and the split's seed
+    /// (what [`ShapeSets`] needs besides the reference and the samples).
+    pub imported: Option<ImportedShapes>,
+}
+
+/// The real shapes of an imported experiment on its reference mesh,
+/// besides the held-out ones.
+#[derive(Debug)]
+pub struct ImportedShapes {
+    /// The training shapes carried to the reference mesh.
+    pub train: InMemorySignals,
+    /// The template's bounding-box diagonal (the unit of distances).
+    pub diagonal: f64,
+    /// The split's seed.
+    pub seed: u64,
+    /// The real shapes' bending energies on the template, training then
+    /// held-out ([`ShapeSets::real_bending`]).
+    pub real_bending: Vec<f64>,
+}
+
+impl Evaluation {
+    /// The [`ShapeSets`] of an imported shape set and `samples` (`None`
+    /// for other sets).
+    pub fn shape_sets<'a>(&'a self, samples: &'a InMemorySignals) -> Option<ShapeSets<'a>> {
+        self.imported.as_ref().map(|i| ShapeSets {
+            mesh: &self.mesh,
+            train: &i.train,
+            held_out: &self.reference,
+            samples,
+            diagonal: i.diagonal,
+            seed: i.seed,
+            real_bending: Some(&i.real_bending),
+        })
+    }
 }
 
 /// Evaluates `generated` (on the reference set's mesh, with its channels)
@@ -156,21 +202,41 @@ pub fn evaluate(reference: &Dataset, generated: &InMemorySignals) -> Result<Eval
         .then(|| GmmConfig::from_manifest_params(&reference.manifest().generator_params))
         .transpose()?;
     let mass = Operators::new(&mesh)?.mass;
-    let reference = reference.load_all()?;
-    let metrics = Metrics::evaluate(&mass, generated, &reference)?;
+    let reference_signals = reference.load_all()?;
+    let metrics = Metrics::evaluate(&mass, generated, &reference_signals)?;
     let quality = match (&gmm, generated.channels()) {
         (Some(config), 1) => {
             let generator = GmmGenerator::new(&mesh, config)?;
             Some(GmmQualityReport::of(
-                &generator, &mesh, &mass, generated, &reference,
+                &generator,
+                &mesh,
+                &mass,
+                generated,
+                &reference_signals,
             )?)
         }
         _ => None,
     };
+    let (shape_quality, imported) = match ImportManifest::of(reference)? {
+        Some(m) if m.positions && generated.channels() == 3 => {
+            let imported = imported_shapes(reference, m.seed)?;
+            let q = shape_quality::shape_quality(&ShapeSets {
+                mesh: &mesh,
+                train: &imported.train,
+                held_out: &reference_signals,
+                samples: generated,
+                diagonal: imported.diagonal,
+                seed: m.seed,
+                real_bending: Some(&imported.real_bending),
+            })?;
+            (Some(q), Some(imported))
+        }
+        _ => (None, None),
+    };
     let (shapes, projections) = match &deform {
         Some(d) => {
             let p = plausibility::plausibility(&d.space, &mesh, generated, PROJECTIONS_KEPT)?;
-            let r = plausibility::plausibility(&d.space, &mesh, &reference, 0)?;
+            let r = plausibility::plausibility(&d.space, &mesh, &reference_signals, 0)?;
             let (g, rs) = (ParamSpread::of(&p.params), ParamSpread::of(&r.params));
             let report = ShapeReport {
                 projection_mse: p.mean,
@@ -193,10 +259,72 @@ pub fn evaluate(reference: &Dataset, generated: &InMemorySignals) -> Result<Eval
             metrics,
             quality,
             shapes,
+            shape_quality,
         },
         mesh,
-        reference,
+        reference: reference_signals,
         projections,
+        imported,
+    })
+}
+
+/// The experiment folder an imported dataset belongs to (its parent).
+fn experiment_of(dataset: &Dataset) -> Result<&Path> {
+    dataset.dir().parent().ok_or_else(|| {
+        DataError::format(
+            dataset.dir(),
+            "an imported reference set must sit in its experiment folder (beside train/ and transfer.npy)",
+        )
+    })
+}
+
+/// The real shapes of the imported experiment `reference` belongs to: the
+/// training set carried to the reference mesh by the experiment's
+/// transfer, the template's diagonal, and the bending energies of the
+/// training and held-out shapes on the template, where they were given.
+fn imported_shapes(reference: &Dataset, seed: u64) -> Result<ImportedShapes> {
+    let dir = experiment_of(reference)?;
+    let train = Dataset::open(dir.join(mfm_data::layout::TRAIN))?;
+    let holdout = Dataset::open(dir.join(mfm_data::layout::HOLDOUT))?;
+    let transfer = Transfer::read(&dir.join(import::TRANSFER), train.num_vertices())?;
+    if transfer.target_vertices() != reference.num_vertices() {
+        return Err(DataError::format(
+            dir.join(import::TRANSFER),
+            format!(
+                "carries the template to {} vertices, but the reference mesh has {}",
+                transfer.target_vertices(),
+                reference.num_vertices()
+            ),
+        ));
+    }
+    if holdout.len() != reference.len() {
+        return Err(DataError::format(
+            holdout.dir(),
+            format!(
+                "holds {} shapes, the reference set {}: not the same held-out shapes",
+                holdout.len(),
+                reference.len()
+            ),
+        ));
+    }
+    mfm_files::space::ensure_memory(
+        "the training shapes on the reference mesh",
+        (train.len() as u128)
+            * (reference.num_vertices() as u128 + train.num_vertices() as u128)
+            * 3,
+        4,
+    )?;
+    let on_template = train.load_all()?;
+    let mut real_bending = shape_quality::bending_energies(train.mesh(), &on_template)?;
+    real_bending.extend(shape_quality::bending_energies(
+        holdout.mesh(),
+        &holdout.load_all()?,
+    )?);
+    Ok(ImportedShapes {
+        train: transfer.apply_set(&on_template)?,
+        diagonal: train.mesh().bounding_box_diagonal(),
+        seed,
+        real_bending,
     })
 }
 
@@ -255,7 +383,8 @@ pub fn plausibility_only(
 pub struct EvalFiles<'a> {
     /// Generated samples, `.npy` `[N, V, C]` ([`InMemorySignals::read_npy`]).
     pub samples: &'a Path,
-    /// The reference dataset folder (its mesh is the samples' mesh).
+    /// The reference dataset folder (its mesh is the samples' mesh), or
+    /// an experiment folder whose `reference/` set is meant.
     pub reference: &'a Path,
     /// Where to write the [`EvalReport`] as JSON.
     pub json: Option<&'a Path>,
@@ -263,7 +392,9 @@ pub struct EvalFiles<'a> {
     /// shapes beside their projections ([`pictures::projections`]); else the
     /// point-wise means ([`pictures::means`]) with `STEM_difference.png`
     /// beside it, and for a GMM set also `STEM_samples.png`
-    /// ([`pictures::data_and_samples`]).
+    /// ([`pictures::data_and_samples`]); for an imported shape set, the
+    /// first samples beside their nearest real shapes
+    /// ([`pictures::nearest_real`]).
     pub png: Option<&'a Path>,
 }
 
@@ -279,8 +410,9 @@ impl EvalFiles<'_> {
     pub fn run(&self) -> Result<Evaluation> {
         let undo = guard(&[self.samples, self.reference], self.json, self.png)?;
         let generated = read_finite(self.samples)?;
-        let reference = Dataset::open(self.reference)?;
-        let dir = self.reference.display();
+        let reference_dir = reference_set_of(self.reference);
+        let reference = Dataset::open(&reference_dir)?;
+        let dir = reference_dir.display();
         if generated.num_vertices() != reference.num_vertices() {
             return Err(DataError::format(
                 self.samples,
@@ -311,9 +443,14 @@ impl EvalFiles<'_> {
                 let samples = pictures::sibling_png(png, "samples");
                 pictures::data_and_samples(&e.mesh, &e.reference, &generated, q, &samples)?;
             }
-            match &e.projections {
-                Some(p) => pictures::projections(&e.mesh, &generated, p, png)?,
-                None => pictures::means(
+            match (
+                &e.projections,
+                &e.report.shape_quality,
+                e.shape_sets(&generated),
+            ) {
+                (Some(p), _, _) => pictures::projections(&e.mesh, &generated, p, png)?,
+                (None, Some(q), Some(sets)) => pictures::nearest_real(&sets, q, png)?,
+                _ => pictures::means(
                     &e.mesh,
                     &generated,
                     &e.reference,
@@ -325,6 +462,20 @@ impl EvalFiles<'_> {
         }
         undo.keep();
         Ok(e)
+    }
+}
+
+/// The reference set a `--reference` path names: the path itself, or for
+/// an experiment folder (one with `reference/` and no manifest of its
+/// own), its `reference/` set.
+fn reference_set_of(path: &Path) -> std::path::PathBuf {
+    let set = path.join(mfm_data::layout::REFERENCE);
+    if !path.join(mfm_data::dataset::MANIFEST_FILE).exists()
+        && set.join(mfm_data::dataset::MANIFEST_FILE).is_file()
+    {
+        set
+    } else {
+        path.to_path_buf()
     }
 }
 

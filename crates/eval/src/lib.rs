@@ -11,6 +11,9 @@
 //!   floor, diversity, and the spread of deformation parameters;
 //! - [`plausibility`]: the distance of generated shapes to the deformation
 //!   space of their data;
+//! - [`shape_quality`]: generated shapes against real ones on one mesh,
+//!   without a generator: plausibility, coverage, novelty and roughness
+//!   over the data's own floor, flipped faces;
 //! - [`evaluation`]: the protocol of `mfm eval` on a reference dataset, its
 //!   serializable report and the files it reads and writes;
 //! - [`pictures`]: the evaluation's pictures (data above samples, shapes
@@ -38,3 +41,4 @@ pub mod metrics;
 pub mod pictures;
 pub mod plausibility;
 pub mod quality;
+pub mod shape_quality;

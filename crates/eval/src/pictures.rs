@@ -5,10 +5,11 @@
 
 use crate::plausibility::Plausibility;
 use crate::quality::GmmQualityReport;
+use crate::shape_quality::{RealSet, ShapeQuality, ShapeSets, weighted_mean};
 use mfm_data::pictures::{SHOWN, Shown, save};
 use mfm_data::{InMemorySignals, Result, SignalSource};
 use mfm_geometry::TriMesh;
-use mfm_render::{ColorRange, Colormap, RenderOptions};
+use mfm_render::{ColorRange, Colormap, GridOptions, Panel, RenderOptions};
 use std::path::{Path, PathBuf};
 
 /// The first [`SHOWN`] reference signals above the first [`SHOWN`]
@@ -73,6 +74,81 @@ pub fn projections(
         p.mean
     );
     save(mesh, &items, 4, &title, path)
+}
+
+/// The first samples of `sets` (at most [`SHOWN`] / 2), each beside its
+/// nearest real shape (`q`, of these sets), captioned with the distance
+/// (over the floor), the roughness and the flipped faces, 4 panels to a
+/// row. Every shape is centred (its mass-weighted mean, with the rest
+/// mesh's lumped mass, removed) and all are drawn with one camera fitted to
+/// them together, so sizes compare across panels (the grid of
+/// [`mfm_data::pictures::save`] frames each panel on its own, which would
+/// blow a shrunken sample up to its neighbour's size).
+///
+/// # Errors
+/// [`mfm_data::DataError::SizeMismatch`] when `q` names a real shape that
+/// the sets do not hold or a set is not positions of the mesh's vertices;
+/// the renderer's errors.
+pub fn nearest_real(sets: &ShapeSets, q: &ShapeQuality, path: &Path) -> Result<()> {
+    let mesh = sets.mesh;
+    let v = mesh.num_vertices();
+    if sets.samples.channels() != 3 || sets.samples.num_vertices() != v {
+        return Err(mfm_data::DataError::SizeMismatch {
+            what: "values per sample (positions of the mesh's vertices)".into(),
+            expected: 3 * v,
+            found: sets.samples.channels() * sets.samples.num_vertices(),
+        });
+    }
+    let mut weights = mfm_geometry::operators::lumped_mass(mesh);
+    let total: f64 = weights.iter().sum();
+    weights.iter_mut().for_each(|m| *m /= total);
+    let centred = |mut p: Vec<[f64; 3]>| -> Result<TriMesh> {
+        let mean = weighted_mean(&weights, p.iter().copied());
+        if mean.iter().all(|c| c.is_finite()) {
+            p.iter_mut()
+                .for_each(|x| (0..3).for_each(|k| x[k] -= mean[k]));
+        }
+        Ok(mesh.with_positions(p)?)
+    };
+    let mut shown = Vec::new();
+    for (i, s) in q
+        .per_sample
+        .iter()
+        .enumerate()
+        .take((SHOWN / 2).min(sets.samples.len()))
+    {
+        let caption = format!(
+            "sample {i}: d/floor {:.2}\nrough {:.2} flips {:.1}%",
+            s.distance / q.floor,
+            s.roughness,
+            100.0 * s.flipped
+        );
+        shown.push((centred(sets.samples.positions(i))?, caption));
+        let set = match s.nearest.set {
+            RealSet::Train => "training",
+            RealSet::HeldOut => "held-out",
+        };
+        let caption = format!(
+            "its nearest: {set} {}\nd {:.4}",
+            s.nearest.index, s.distance
+        );
+        shown.push((centred(sets.real_positions(s.nearest)?)?, caption));
+    }
+    let panels: Vec<Panel<'_>> = shown
+        .iter()
+        .map(|(m, c)| Panel::new(m, None, c.clone()))
+        .collect();
+    let opts = GridOptions {
+        title: Some(format!(
+            "samples beside their nearest real shapes (centred, one scale); plausibility {:.2}, \
+             roughness {:.2}",
+            q.plausibility, q.roughness
+        )),
+        shared_camera: true,
+        ..GridOptions::default()
+    };
+    let img = mfm_render::render_grid(&panels, 4, &opts)?;
+    Ok(mfm_render::save_png(&img, path)?)
 }
 
 /// The point-wise means of channel 0 (generated beside reference) to

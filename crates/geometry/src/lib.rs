@@ -2,8 +2,9 @@
 //!
 //! The mesh core of mfm: the triangle mesh type, its topology, validation
 //! with a readable [`MeshReport`], the intrinsic operators every other mfm
-//! crate is built on, heat-method geodesic distances, the canonical frame, procedural meshes and uniform
-//! subdivision. Mesh files are read and written by `mfm-meshio`, remeshing
+//! crate is built on, heat-method geodesic distances, the canonical frame, procedural meshes, uniform
+//! subdivision and closest points on a mesh's surface ([`closest`]). Mesh
+//! files are read and written by `mfm-meshio`, remeshing
 //! (refinement, decimation, edge flips, holes) is `mfm-processing`, and
 //! pictures are `mfm-render`; this crate has no file-format, image or font
 //! dependency. Its only mfm dependency is `mfm-solver` (sparse Cholesky), with
@@ -30,6 +31,7 @@
 //! assert!((m.iter().sum::<f64>() - mesh.total_area()).abs() < 1e-12);
 //! ```
 
+pub mod closest;
 pub mod frame;
 pub mod geodesic;
 pub mod mesh;

@@ -29,6 +29,22 @@ fn skip_or_fail(reason: &str) {
     eprintln!("SKIPPED: {reason}");
 }
 
+/// Folder of a shared real sequence (`$MFM_SHARED_DATA/NAME` or
+/// `<root>/../shared/data/NAME`, holding `template.obj` and `frames.npy`),
+/// or `None` with a printed skip reason when it is missing.
+pub fn shared_data(name: &str) -> Option<PathBuf> {
+    let dir = std::env::var_os("MFM_SHARED_DATA")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| workspace_root().join("../shared/data"))
+        .join(name);
+    if dir.join("frames.npy").is_file() {
+        Some(dir)
+    } else {
+        eprintln!("SKIPPED: shared sequence {} not found", dir.display());
+        None
+    }
+}
+
 /// Path of a shared test mesh (`$MFM_SHARED_MESHES` or `<root>/../shared/meshes`),
 /// or `None` with a printed skip reason when it is missing.
 pub fn shared_mesh(name: &str) -> Option<PathBuf> {

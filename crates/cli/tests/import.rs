@@ -1,0 +1,394 @@
+//! `mfm dataset import` and `mfm eval` on imported shapes, driving the real
+//! binary: a folder of OBJ frames in, an experiment folder out; the
+//! generator-free measures on known answers; refusals and interrupts that
+//! leave nothing behind; and (with the network feature) import, train,
+//! sample on the reference mesh and evaluate, samples in the user's units.
+#![allow(clippy::unwrap_used)]
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use mfm_geometry::TriMesh;
+use mfm_geometry::procedural;
+
+fn mfm_in(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_mfm"))
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .expect("the mfm binary runs")
+}
+
+fn err(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[track_caller]
+fn ok(dir: &Path, args: &[&str]) -> String {
+    let o = mfm_in(dir, args);
+    assert!(o.status.success(), "{args:?}: {}", err(&o));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+#[track_caller]
+fn refused(dir: &Path, args: &[&str], needle: &str) -> String {
+    let o = mfm_in(dir, args);
+    assert!(!o.status.success(), "{args:?} succeeded");
+    let e = err(&o);
+    assert!(e.contains(needle), "{args:?}: expected {needle:?} in:\n{e}");
+    e
+}
+
+/// Frame `k` of a travelling, bending capsule: far from the unit box, in
+/// other units (a scale of 40), so that returning to them is visible.
+fn frame(rest: &TriMesh, k: usize) -> TriMesh {
+    let bend = 0.08 * k as f64;
+    let moved: Vec<[f64; 3]> = rest
+        .positions()
+        .iter()
+        .map(|p| {
+            let a = bend * p[1];
+            [
+                40.0 * (p[0] * a.cos() - p[1] * a.sin()) + 100.0 + 2.0 * k as f64,
+                40.0 * (p[0] * a.sin() + p[1] * a.cos()),
+                40.0 * p[2] - 50.0,
+            ]
+        })
+        .collect();
+    rest.with_positions(moved).unwrap()
+}
+
+/// Writes `n` frames as `DIR/frames/frame_{k}.obj` and a README.
+fn write_frames(dir: &Path, n: usize) -> TriMesh {
+    let frames = dir.join("frames");
+    std::fs::create_dir_all(&frames).unwrap();
+    let rest = procedural::capsule(0.3, 0.8, 10, 20).unwrap();
+    for k in 0..n {
+        mfm_meshio::write_obj(frames.join(format!("frame_{k}.obj")), &frame(&rest, k)).unwrap();
+    }
+    std::fs::write(frames.join("README"), "frames of a test sequence").unwrap();
+    rest
+}
+
+#[test]
+fn imported_frames_evaluate_against_themselves() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    write_frames(d, 24);
+    let out = ok(
+        d,
+        &[
+            "dataset",
+            "import",
+            "frames",
+            "--holdout",
+            "every:4",
+            "--out",
+            "data",
+        ],
+    );
+    assert!(out.contains("18 training, 6 held out"), "{out}");
+    for f in [
+        "train/signals.npy",
+        "holdout/signals.npy",
+        "reference/signals.npy",
+        "transfer.npy",
+        "import.json",
+        "preview.png",
+    ] {
+        assert!(d.join("data").join(f).is_file(), "{f}");
+    }
+    // the held-out shapes themselves as samples: each is its own nearest
+    // real shape (plausibility 0), as far from training as the floor
+    // (novelty 1), unflipped; carried to the refined half they are
+    // piecewise flat between the template's edges, whose creases hold
+    // more bending energy than the template's own (roughness above 1)
+    std::fs::copy(d.join("data/reference/signals.npy"), d.join("held.npy")).unwrap();
+    let out = ok(
+        d,
+        &[
+            "eval",
+            "--samples",
+            "held.npy",
+            "--reference",
+            "data",
+            "--out",
+            "m.json",
+            "--png",
+            "m.png",
+        ],
+    );
+    assert!(
+        out.contains("plausibility 0.00") && out.contains("novelty 1.00"),
+        "{out}"
+    );
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("m.json")).unwrap()).unwrap();
+    let q = &m["shape_quality"];
+    assert_eq!(q["plausibility"], 0.0, "{q}");
+    assert!((q["novelty"].as_f64().unwrap() - 1.0).abs() < 1e-9, "{q}");
+    let rough = q["roughness"].as_f64().unwrap();
+    assert!(rough > 1.0 && rough < 2.5, "{q}");
+    assert_eq!(q["flipped"]["max"], 0.0);
+    // with the template as the reference mesh, the same shapes are exactly
+    // as rough as themselves
+    ok(
+        d,
+        &[
+            "dataset",
+            "import",
+            "frames",
+            "--holdout",
+            "every:4",
+            "--reference-mesh",
+            "frames/frame_0.obj",
+            "--out",
+            "same",
+        ],
+    );
+    std::fs::copy(d.join("same/reference/signals.npy"), d.join("same.npy")).unwrap();
+    ok(
+        d,
+        &[
+            "eval",
+            "--samples",
+            "same.npy",
+            "--reference",
+            "same",
+            "--out",
+            "s.json",
+        ],
+    );
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("s.json")).unwrap()).unwrap();
+    let r = s["shape_quality"]["roughness"].as_f64().unwrap();
+    assert!((r - 1.0).abs() < 1e-6, "{s}");
+    assert!(d.join("m.png").is_file());
+    // the training shapes on the template are not on the reference mesh
+    refused(
+        d,
+        &[
+            "eval",
+            "--samples",
+            "data/train/signals.npy",
+            "--reference",
+            "data",
+        ],
+        "vertices",
+    );
+}
+
+#[test]
+fn bad_imports_are_refused_naming_the_input_and_leave_nothing() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    let rest = write_frames(d, 3);
+    std::fs::create_dir_all(d.join("empty")).unwrap();
+    refused(
+        d,
+        &["dataset", "import", "empty", "--out", "a"],
+        "holds no mesh files",
+    );
+    refused(
+        d,
+        &["dataset", "import", "frames", "--strict", "--out", "a"],
+        "README",
+    );
+    // one frame of another mesh
+    mfm_meshio::write_obj(d.join("frames/frame_1.obj"), &procedural::icosphere(1)).unwrap();
+    refused(
+        d,
+        &["dataset", "import", "frames", "--out", "a"],
+        "frame_1.obj",
+    );
+    mfm_meshio::write_obj(d.join("frames/frame_1.obj"), &frame(&rest, 1)).unwrap();
+    // a NaN coordinate names the file and the vertex
+    let text = std::fs::read_to_string(d.join("frames/frame_2.obj")).unwrap();
+    let mut lines: Vec<String> = text.lines().map(str::to_owned).collect();
+    let first_v = lines.iter().position(|l| l.starts_with("v ")).unwrap();
+    lines[first_v] = "v nan 0 0".into();
+    std::fs::write(d.join("frames/frame_2.obj"), lines.join("\n")).unwrap();
+    let e = refused(
+        d,
+        &["dataset", "import", "frames", "--out", "a"],
+        "frame_2.obj",
+    );
+    assert!(e.to_lowercase().contains("vertex 0"), "{e}");
+    // too few shapes and holdouts that leave nothing
+    refused(
+        d,
+        &["dataset", "import", "frames/frame_0.obj", "--out", "a"],
+        "at least 2",
+    );
+    refused(
+        d,
+        &[
+            "dataset",
+            "import",
+            "frames/frame_0.obj",
+            "frames/frame_1.obj",
+            "--holdout",
+            "2",
+            "--out",
+            "a",
+        ],
+        "leaving none to train on",
+    );
+    refused(
+        d,
+        &[
+            "dataset",
+            "import",
+            "frames",
+            "--holdout",
+            "ten",
+            "--out",
+            "a",
+        ],
+        "--holdout",
+    );
+    assert!(!d.join("a").exists() && !d.join(".a.mfm-lock").exists());
+    // the output may not be an input
+    refused(
+        d,
+        &["dataset", "import", "frames", "--out", "frames"],
+        "frames",
+    );
+}
+
+#[test]
+fn an_interrupted_import_leaves_nothing() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    let mesh = procedural::icosphere(5);
+    let v = mesh.num_vertices();
+    mfm_meshio::write_ply(d.join("mesh.ply"), &mesh, &[]).unwrap();
+    let n = 600;
+    let values: Vec<f32> = (0..n * v * 3).map(|i| (i % 1000) as f32 * 1e-3).collect();
+    mfm_files::npy::write(d.join("big.npy"), &values, &[n as u64, v as u64, 3]).unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_mfm"))
+        .current_dir(d)
+        .args([
+            "dataset",
+            "import",
+            "--signals",
+            "big.npy",
+            "--mesh",
+            "mesh.ply",
+            "--holdout",
+            "10%",
+            "--out",
+            "data",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    while !d.join("data").exists() {
+        assert!(t0.elapsed().as_secs() < 120, "the import did not get going");
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let o = child.wait_with_output().unwrap();
+    if o.status.success() {
+        eprintln!("the import finished before the signal; nothing to check");
+        return;
+    }
+    assert_eq!(o.status.code(), Some(130), "{}", err(&o));
+    let mut left: Vec<String> = std::fs::read_dir(d)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    assert_eq!(left, ["big.npy", "mesh.ply"], "what the import left");
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn imported_shapes_train_sample_and_come_back_in_the_users_units() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    write_frames(d, 16);
+    ok(
+        d,
+        &[
+            "dataset",
+            "import",
+            "frames",
+            "--holdout",
+            "every:4",
+            "--out",
+            "data",
+        ],
+    );
+    let config = "[model]\npreset = \"small\"\nwidth = 8\nblocks = 1\nvector_layers = 1\n\
+                  condition_on_xyz = true\n\
+                  [train]\nsteps = 4\nbatch = 2\ncheckpoint_every = 2\nlog_every = 1\n\
+                  [sample]\nsteps = 2\n";
+    std::fs::write(d.join("run.toml"), config).unwrap();
+    ok(
+        d,
+        &[
+            "train",
+            "--config",
+            "run.toml",
+            "--dataset",
+            "data/train",
+            "--out",
+            "run",
+            "--quiet",
+        ],
+    );
+    ok(
+        d,
+        &[
+            "sample",
+            "--run",
+            "run",
+            "--mesh",
+            "data/reference/mesh.ply",
+            "--n",
+            "3",
+            "--out",
+            "samples",
+        ],
+    );
+    let a = mfm_files::npy::read::<f32>(&d.join("samples/samples.npy")).unwrap();
+    // in the frames' units and place: centred near x = 115, z = -50
+    let v = a.shape[1];
+    let mean_x: f64 = a
+        .values
+        .chunks_exact(3)
+        .map(|p| f64::from(p[0]))
+        .sum::<f64>()
+        / (3 * v) as f64;
+    let mean_z: f64 = a
+        .values
+        .chunks_exact(3)
+        .map(|p| f64::from(p[2]))
+        .sum::<f64>()
+        / (3 * v) as f64;
+    assert!(
+        (mean_x - 115.0).abs() < 10.0 && (mean_z + 50.0).abs() < 10.0,
+        "{mean_x} {mean_z}"
+    );
+    let out = ok(
+        d,
+        &[
+            "eval",
+            "--samples",
+            "samples/samples.npy",
+            "--reference",
+            "data",
+        ],
+    );
+    assert!(
+        out.contains("plausibility") && out.contains("roughness"),
+        "{out}"
+    );
+}
