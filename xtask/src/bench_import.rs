@@ -5,7 +5,8 @@
 //! `--vertices` vertices, each shape a different smooth deformation of it)
 //! as binary PLY or OBJ files into a folder, and a NumPy array of the same
 //! shapes, then times `mfm dataset import` on the folder and on the array
-//! (`--signals`), with the peak resident memory of the import process
+//! (`--signals`), 10% held out (so the reference set is carried too),
+//! with the peak resident memory of the import process
 //! (`wait4`'s `ru_maxrss`) next to the size of the `signals.npy` it wrote.
 
 use crate::flow_steps::arg;

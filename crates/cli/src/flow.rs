@@ -21,8 +21,8 @@ pub struct TrainArgs {
     #[arg(long, conflicts_with = "preset")]
     pub(crate) config: Option<PathBuf>,
     /// Named configuration: `cpu` (scalar signals, minutes on a laptop),
-    /// `cpu-deform` (`cpu` conditioned on the source xyz, for `mfm dataset
-    /// deform` data), `paper` (the authors' human-pose recipe, for a GPU) or
+    /// `cpu-deform` (shapes: `cpu` conditioned on the source xyz, 3000
+    /// steps, for `mfm dataset deform` and `mfm dataset import` data), `paper` (the authors' human-pose recipe, for a GPU) or
     /// `paper-elastic` (their elastic-deformation recipe). With --mode
     /// predictor or arbitrary: `cpu` (default) or `paper` (the official
     /// arbitrary-source configurations).

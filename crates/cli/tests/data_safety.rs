@@ -4,36 +4,10 @@
 
 use std::fs;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
-fn mfm_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mfm"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("the mfm binary runs")
-}
-
-fn err(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-/// Runs and expects failure with `needle` in the one-line error.
-#[track_caller]
-fn refused(dir: &Path, args: &[&str], needle: &str) -> String {
-    let o = mfm_in(dir, args);
-    assert!(!o.status.success(), "{args:?} succeeded: {}", err(&o));
-    let e = err(&o);
-    assert!(e.contains(needle), "{args:?}: expected `{needle}` in: {e}");
-    e
-}
-
-#[track_caller]
-fn ok(dir: &Path, args: &[&str]) -> Output {
-    let o = mfm_in(dir, args);
-    assert!(o.status.success(), "{args:?}: {}", err(&o));
-    o
-}
+mod common;
+use common::{err, ok, refused};
 
 fn tmp_files(dir: &Path) -> Vec<String> {
     let mut found = Vec::new();

@@ -6,37 +6,18 @@
 #![allow(clippy::unwrap_used)]
 
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
 use mfm_geometry::TriMesh;
 use mfm_geometry::procedural;
 
-fn mfm_in(dir: &Path, args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_mfm"))
-        .current_dir(dir)
-        .args(args)
-        .output()
-        .expect("the mfm binary runs")
-}
+mod common;
+use common::{err, ok, refused};
 
-fn err(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
+/// `mfm ARGS` in `dir`, expected to succeed; its standard output.
 #[track_caller]
-fn ok(dir: &Path, args: &[&str]) -> String {
-    let o = mfm_in(dir, args);
-    assert!(o.status.success(), "{args:?}: {}", err(&o));
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-#[track_caller]
-fn refused(dir: &Path, args: &[&str], needle: &str) -> String {
-    let o = mfm_in(dir, args);
-    assert!(!o.status.success(), "{args:?} succeeded");
-    let e = err(&o);
-    assert!(e.contains(needle), "{args:?}: expected {needle:?} in:\n{e}");
-    e
+fn stdout_of(dir: &Path, args: &[&str]) -> String {
+    common::out(&ok(dir, args))
 }
 
 /// Frame `k` of a travelling, bending capsule: far from the unit box, in
@@ -75,7 +56,7 @@ fn imported_frames_evaluate_against_themselves() {
     let d = tempfile::tempdir().unwrap();
     let d = d.path();
     write_frames(d, 24);
-    let out = ok(
+    let out = stdout_of(
         d,
         &[
             "dataset",
@@ -104,7 +85,7 @@ fn imported_frames_evaluate_against_themselves() {
     // piecewise flat between the template's edges, whose creases hold
     // more bending energy than the template's own (roughness above 1)
     std::fs::copy(d.join("data/reference/signals.npy"), d.join("held.npy")).unwrap();
-    let out = ok(
+    let out = stdout_of(
         d,
         &[
             "eval",
@@ -164,6 +145,24 @@ fn imported_frames_evaluate_against_themselves() {
     let r = s["shape_quality"]["roughness"].as_f64().unwrap();
     assert!((r - 1.0).abs() < 1e-6, "{s}");
     assert!(d.join("m.png").is_file());
+    // samples on the template are judged against the held-out set there
+    let out = stdout_of(
+        d,
+        &[
+            "eval",
+            "--samples",
+            "data/holdout/signals.npy",
+            "--reference",
+            "data/holdout",
+            "--out",
+            "h.json",
+        ],
+    );
+    assert!(out.contains("plausibility 0.00"), "{out}");
+    let h: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("h.json")).unwrap()).unwrap();
+    let r = h["shape_quality"]["roughness"].as_f64().unwrap();
+    assert!((r - 1.0).abs() < 1e-6, "{h}");
     // the training shapes on the template are not on the reference mesh
     refused(
         d,
@@ -377,7 +376,7 @@ fn imported_shapes_train_sample_and_come_back_in_the_users_units() {
         (mean_x - 115.0).abs() < 10.0 && (mean_z + 50.0).abs() < 10.0,
         "{mean_x} {mean_z}"
     );
-    let out = ok(
+    let out = stdout_of(
         d,
         &[
             "eval",

@@ -318,7 +318,9 @@ fn signal_arrays_and_ply_properties_import_as_channels() {
         .unwrap();
     }
     let files = MeshFiles {
-        files: list_mesh_files(std::slice::from_ref(&dir), true).unwrap().files,
+        files: list_mesh_files(std::slice::from_ref(&dir), true)
+            .unwrap()
+            .files,
         properties: vec!["cold".into(), "heat".into()],
     };
     let out = tmp.path().join("props");
@@ -395,9 +397,11 @@ fn the_authors_dataset_files_read_as_shapes() {
     assert!(err.to_string().contains("\"tar_verts\""), "{err}");
 }
 
-#[test]
-fn a_real_sequence_written_as_obj_files_imports_frame_for_frame() {
-    let Some(dir) = shared_data("horse-gallop") else {
+/// Writes every 4th frame of the shared sequence `name` as an OBJ folder,
+/// imports it with every 4th of those held out, and checks every
+/// training row against its frame.
+fn real_sequence_imports_frame_for_frame(name: &str) {
+    let Some(dir) = shared_data(name) else {
         return;
     };
     let template = mfm_meshio::read_mesh(dir.join("template.obj")).unwrap();
@@ -424,10 +428,9 @@ fn a_real_sequence_written_as_obj_files_imports_frame_for_frame() {
     let out = tmp.path().join("data");
     let s = import(&mesh_files(&objs), &template, Holdout::Every(4), None, &out).unwrap();
     assert_eq!(s.train + s.held_out, picked.len());
-    let train = Dataset::open(out.join(TRAIN)).unwrap().load_all().unwrap();
-    let m = ImportManifest::of(&Dataset::open(out.join(TRAIN)).unwrap())
-        .unwrap()
-        .unwrap();
+    let train = Dataset::open(out.join(TRAIN)).unwrap();
+    let m = ImportManifest::of(&train).unwrap().unwrap();
+    let train = train.load_all().unwrap();
     for (row, signal) in m.signals.iter().enumerate() {
         let frame = picked[signal.index];
         assert_eq!(
@@ -437,6 +440,16 @@ fn a_real_sequence_written_as_obj_files_imports_frame_for_frame() {
             signal.name
         );
     }
+}
+
+#[test]
+fn the_horse_gallop_written_as_obj_files_imports_frame_for_frame() {
+    real_sequence_imports_frame_for_frame("horse-gallop");
+}
+
+#[test]
+fn the_crane_performance_written_as_obj_files_imports_frame_for_frame() {
+    real_sequence_imports_frame_for_frame("crane");
 }
 
 #[test]

@@ -280,23 +280,31 @@ fn experiment_of(dataset: &Dataset) -> Result<&Path> {
 
 /// The real shapes of the imported experiment `reference` belongs to: the
 /// training set carried to the reference mesh by the experiment's
-/// transfer, the template's diagonal, and the bending energies of the
+/// transfer (as it is for the held-out set on the template), the
+/// template's diagonal, and the bending energies of the
 /// training and held-out shapes on the template, where they were given.
 fn imported_shapes(reference: &Dataset, seed: u64) -> Result<ImportedShapes> {
     let dir = experiment_of(reference)?;
     let train = Dataset::open(dir.join(mfm_data::layout::TRAIN))?;
     let holdout = Dataset::open(dir.join(mfm_data::layout::HOLDOUT))?;
-    let transfer = Transfer::read(&dir.join(import::TRANSFER), train.num_vertices())?;
-    if transfer.target_vertices() != reference.num_vertices() {
-        return Err(DataError::format(
-            dir.join(import::TRANSFER),
-            format!(
-                "carries the template to {} vertices, but the reference mesh has {}",
-                transfer.target_vertices(),
-                reference.num_vertices()
-            ),
-        ));
-    }
+    // the held-out set on the template needs no transfer
+    let on_template = ImportManifest::of(reference)?.is_some_and(|m| m.mesh_role == "template");
+    let transfer = if on_template {
+        None
+    } else {
+        let transfer = Transfer::read(&dir.join(import::TRANSFER), train.num_vertices())?;
+        if transfer.target_vertices() != reference.num_vertices() {
+            return Err(DataError::format(
+                dir.join(import::TRANSFER),
+                format!(
+                    "carries the template to {} vertices, but the reference mesh has {}",
+                    transfer.target_vertices(),
+                    reference.num_vertices()
+                ),
+            ));
+        }
+        Some(transfer)
+    };
     if holdout.len() != reference.len() {
         return Err(DataError::format(
             holdout.dir(),
@@ -314,15 +322,20 @@ fn imported_shapes(reference: &Dataset, seed: u64) -> Result<ImportedShapes> {
             * 3,
         4,
     )?;
-    let on_template = train.load_all()?;
-    let mut real_bending = shape_quality::bending_energies(train.mesh(), &on_template)?;
+    let on_template_shapes = train.load_all()?;
+    let mut real_bending = shape_quality::bending_energies(train.mesh(), &on_template_shapes)?;
     real_bending.extend(shape_quality::bending_energies(
         holdout.mesh(),
         &holdout.load_all()?,
     )?);
+    let diagonal = train.mesh().bounding_box_diagonal();
+    let train = match &transfer {
+        Some(t) => t.apply_set(&on_template_shapes)?,
+        None => on_template_shapes,
+    };
     Ok(ImportedShapes {
-        train: transfer.apply_set(&on_template)?,
-        diagonal: train.mesh().bounding_box_diagonal(),
+        train,
+        diagonal,
         seed,
         real_bending,
     })

@@ -55,7 +55,7 @@
 //! only; [`RunConfig::preset`] gives the named presets `paper` and
 //! `paper-elastic` (the official human-pose and elastic models, conditioned
 //! on source xyz and `t`), `cpu` and `cpu-deform` (a small network and a
-//! few hundred steps, minutes on two cores).
+//! few thousand steps, minutes on two cores).
 //!
 //! # Example
 //! ```
@@ -1057,10 +1057,15 @@ impl RunConfig {
     ///   logit-normal path times; sampling with the weight average
     ///   (`train.ema = 0.999`). A few minutes of training on two cores at
     ///   ~2.5k vertices (docs/BENCHMARKS.md, "The `cpu` preset").
-    /// - `cpu-deform`: the deformation models on `W = 16, K = 2, nl = 2`,
-    ///   conditioned on the source xyz and `t`, 1000 steps with lr `2e-3`
-    ///   then `5e-4` from step 700, uniform path times and no weight
-    ///   average (the recipe measured on shapes).
+    /// - `cpu-deform`: shapes (positions), `cpu` conditioned on the source
+    ///   xyz and `t`, for 3000 steps: on the shared galloping horse this
+    ///   recipe took samples from 2.9 to 2.0 times the data's floor from
+    ///   the nearest real shape and flipped faces from 7.9% to 2.0%, where
+    ///   the former shape recipe (`W = 16, K = 2, nl = 2`, 1000 steps, lr
+    ///   `2e-3` then `5e-4`, uniform times, no average), 3000 steps of it,
+    ///   the new schedule alone, the larger network alone or `sigma = 1`
+    ///   moved it by 0.3 at most (docs/BENCHMARKS.md, "Own data"); about
+    ///   12 minutes on two cores at 8.4k vertices.
     ///
     /// # Errors
     /// [`FmError::Config`] naming the known presets.
@@ -1118,15 +1123,8 @@ impl RunConfig {
             }
             "cpu-deform" => {
                 let mut c = Self::preset("cpu")?;
-                c.model.width = Some(16);
-                c.model.blocks = Some(2);
-                c.model.vector_layers = Some(2);
                 c.model.condition_on_xyz = true;
-                c.train.steps = 1000;
-                c.train.lr = 2e-3;
-                c.train.lr_schedule = LrSchedule::Milestones(vec![(700, 5e-4)]);
-                c.train.ema = 0.0;
-                c.train.time = TimeSampling::Uniform;
+                c.train.steps = 3000;
                 Ok(c)
             }
             other => Err(FmError::Config(format!(

@@ -32,9 +32,12 @@ pub struct AuthorsDataset {
 
 /// Reads the authors' dataset file at `path`.
 ///
-/// Cost: the file's tensors in memory once, as `f32`.
+/// Cost: the file's tensors in memory once, as `f32` (compared with the
+/// memory available before each is read).
 ///
 /// # Errors
+/// [`DataError::Files`] (`NoMemory`) for a tensor larger than the memory
+/// available;
 /// [`DataError::Files`] (`Format`) naming the file and the key: not a
 /// `torch.save` dict of tensors, a missing key, a tensor of the wrong rank,
 /// dtype or shape, a face index out of range, or a mesh that cannot be
@@ -52,7 +55,15 @@ pub fn read_authors_dataset(path: &Path) -> Result<AuthorsDataset> {
     }
     let mut tensor = |key: &str| -> Result<TensorData> {
         match root.get(key) {
-            Some(Value::Tensor(t)) => file.tensor(key, t).map_err(|e| fail(e.to_string())),
+            Some(Value::Tensor(t)) => {
+                // the record, its dense copy and the f32 values made of it
+                mfm_files::space::ensure_memory(
+                    &format!("{key} of {}", path.display()),
+                    t.storage_numel as u128,
+                    3 * t.dtype.size() as u128 + 4,
+                )?;
+                file.tensor(key, t).map_err(|e| fail(e.to_string()))
+            }
             Some(other) => Err(fail(format!(
                 "{key} is a {}, expected a tensor",
                 other.kind()
