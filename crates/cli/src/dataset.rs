@@ -104,6 +104,12 @@ pub struct ImportArgs {
     /// skip it, with a count).
     #[arg(long)]
     strict: bool,
+    /// Turn each shape to face as the template does, its centroid kept:
+    /// none (default), up:x|y|z (about that vertical axis: a performer
+    /// turning around) or rigid (any rotation, Kabsch). Samples then face
+    /// as the template does.
+    #[arg(long, default_value = "none")]
+    align: String,
     /// Seed of the held-out draw.
     #[arg(long, default_value_t = 0)]
     seed: u64,
@@ -458,11 +464,12 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
     use mfm_data::import::authors::read_authors_dataset;
     use mfm_data::import::inputs::list_mesh_files;
     use mfm_data::import::sources::{MeshFiles, NpyRows};
-    use mfm_data::import::{Holdout, ImportExperiment, SignalFiles};
+    use mfm_data::import::{Align, Holdout, ImportExperiment, SignalFiles};
     let holdout: Holdout = match &a.holdout {
         Some(h) => h.parse()?,
         None => Holdout::None,
     };
+    let align: Align = a.align.parse()?;
     let is_torch = |p: &Path| {
         p.extension()
             .and_then(|e| e.to_str())
@@ -570,6 +577,7 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
         holdout,
         reference_mesh: reference.as_ref().map(|(m, s)| (m, s.as_str())),
         seed: a.seed,
+        align,
         skipped,
         progress: true,
     }

@@ -71,6 +71,7 @@ fn import(
         holdout,
         reference_mesh: reference,
         seed: 0,
+        align: Default::default(),
         skipped: 0,
         progress: false,
     }
@@ -494,4 +495,54 @@ fn a_transfer_round_trips_and_bad_files_are_named() {
     mfm_files::npy::write(&bad, &[0.0, 1.0, 2.0, 0.5, 0.7, 0.1], &[1, 6]).unwrap();
     let err = Transfer::read(&bad, 100).unwrap_err();
     assert!(err.to_string().contains("not barycentric"), "{err}");
+}
+
+#[test]
+fn shapes_turned_about_the_vertical_are_turned_back() {
+    let tmp = tempfile::tempdir().unwrap();
+    let rest = rest();
+    // shape k: the rest shape turned by 0.3 k about y, moved along x
+    let v = rest.num_vertices();
+    let mut values = Vec::new();
+    for k in 0..4 {
+        let a = 0.3 * k as f64;
+        for p in rest.positions() {
+            values.extend([
+                (a.cos() * p[0] + a.sin() * p[2] + k as f64) as f32,
+                p[1] as f32,
+                (-a.sin() * p[0] + a.cos() * p[2]) as f32,
+            ]);
+        }
+    }
+    let path = tmp.path().join("turning.npy");
+    mfm_files::npy::write(&path, &values, &[4, v as u64, 3]).unwrap();
+    let rows = NpyRows::open(&path, true).unwrap();
+    let out = tmp.path().join("data");
+    ImportExperiment {
+        source: &rows,
+        template: &rest,
+        template_name: "rest",
+        holdout: Holdout::None,
+        reference_mesh: None,
+        seed: 0,
+        align: "up:y".parse().unwrap(),
+        skipped: 0,
+        progress: false,
+    }
+    .write(&out)
+    .unwrap();
+    let train = Dataset::open(out.join(TRAIN)).unwrap();
+    assert_eq!(
+        ImportManifest::of(&train).unwrap().unwrap().align,
+        mfm_data::import::Align::Up(1)
+    );
+    let all = train.load_all().unwrap();
+    for k in 0..4 {
+        // the rest shape again, moved by k along x (its place kept)
+        for (q, p) in all.positions(k).iter().zip(rest.positions()) {
+            assert!((q[0] - p[0] - k as f64).abs() < 1e-5, "{k}: {q:?} {p:?}");
+            assert!((q[1] - p[1]).abs() < 1e-5 && (q[2] - p[2]).abs() < 1e-5);
+        }
+    }
+    assert!("sideways".parse::<mfm_data::import::Align>().is_err());
 }

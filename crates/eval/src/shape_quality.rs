@@ -50,10 +50,10 @@
 //!   far below 1: detail lost (over-smoothed); far above 1: a noise
 //!   texture or folds. The real shapes' energies may be given, measured
 //!   where they were given ([`ShapeSets::real_bending`]). (With the *rest*
-//!   mesh's operators instead, a real sequence's frames read 25 to 40
-//!   times the rest shape's energy, nearly all of it at a handful of
+//!   mesh's operators instead, a real sequence's frames read a median of
+//!   25 times the rest shape's energy, nearly all of it at a handful of
 //!   vertices whose rest cotangent weights are huge: the shared galloping
-//!   horse does; with their own, every frame is within 10% of the rest
+//!   horse does; with their own, every frame is within 12% of the rest
 //!   shape.) `0 / 0` counts as 1 and `x / 0` as infinity (`null` in JSON).
 //! - **novelty** = `median_{s in S} min_{t in T} d(s, t) / floor`: near 0 for
 //!   copies of training shapes, about 1 for new shapes as far from the
@@ -674,12 +674,12 @@ fn columns(m: &DistanceMatrix, range: std::ops::Range<usize>) -> DistanceMatrix 
 }
 
 /// The bending energy `E` (see the [module docs](self)) of every shape of
-/// `set` (positions of `mesh`'s vertices), with the operators of `mesh`'s
-/// rest positions.
+/// `set` (positions of `mesh`'s vertices), each with its own operators
+/// (`mesh` moved to the shape).
 ///
 /// # Errors
 /// [`DataError::SizeMismatch`] for shapes that are not positions of the
-/// mesh's vertices; [`DataError::Operators`] for a degenerate mesh.
+/// mesh's vertices.
 pub fn bending_energies(mesh: &TriMesh, set: &InMemorySignals) -> Result<Vec<f64>> {
     check_shapes(set, mesh.num_vertices(), "shapes")?;
     Ok((0..set.len())

@@ -156,6 +156,83 @@ impl Holdout {
     }
 }
 
+/// Whether imported shapes are turned to face as the template does
+/// (`--align`): a sequence that turns about itself (a performer walking
+/// around) is a harder distribution to learn than its poses alone.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Align {
+    /// Shapes as given.
+    #[default]
+    None,
+    /// Each shape turned about the vertical axis (0 = x, 1 = y, 2 = z)
+    /// through its mass-weighted centroid by the angle that best matches
+    /// it to the template ([`mfm_deform::align_to_rest`]); its centroid
+    /// stays where it was.
+    Up(usize),
+    /// Each shape turned about its centroid by the rotation that best
+    /// matches it to the template (mass-weighted Kabsch,
+    /// [`mfm_deform::align_rigid`]); its centroid stays where it was.
+    Rigid,
+}
+
+impl std::str::FromStr for Align {
+    type Err = DataError;
+
+    /// `none`, `up:x|y|z` or `rigid`.
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "none" => Ok(Self::None),
+            "rigid" => Ok(Self::Rigid),
+            "up:x" => Ok(Self::Up(0)),
+            "up:y" => Ok(Self::Up(1)),
+            "up:z" => Ok(Self::Up(2)),
+            other => Err(DataError::Config(format!(
+                "--align {other:?}: expected none, rigid, or up:x, up:y, up:z (the vertical axis)"
+            ))),
+        }
+    }
+}
+
+impl Align {
+    /// `positions` (`V x 3` values of the template's vertices) turned as
+    /// `self` says, their mass-weighted centroid kept.
+    ///
+    /// # Errors
+    /// [`DataError::Deform`] for shapes the fit cannot take (not finite, a
+    /// template without mass).
+    pub fn apply(self, template: &TriMesh, values: &[f32]) -> Result<Vec<f32>> {
+        if self == Self::None {
+            return Ok(values.to_vec());
+        }
+        let p: Vec<[f64; 3]> = values
+            .chunks_exact(3)
+            .map(|c| [c[0].into(), c[1].into(), c[2].into()])
+            .collect();
+        let turned = match self {
+            Self::Up(axis) => mfm_deform::align_to_rest(template, &p, axis)?,
+            _ => mfm_deform::align_rigid(template, &p, template.positions())?,
+        };
+        // both fits move the centroid onto the template's: put it back
+        let mass = mfm_geometry::operators::lumped_mass(template);
+        let centroid = |q: &[[f64; 3]]| {
+            let total: f64 = mass.iter().sum();
+            let mut c = [0.0; 3];
+            for (x, m) in q.iter().zip(&mass) {
+                for k in 0..3 {
+                    c[k] += m * x[k] / total;
+                }
+            }
+            c
+        };
+        let (from, to) = (centroid(&turned), centroid(&p));
+        Ok(turned
+            .iter()
+            .flat_map(|q| [0, 1, 2].map(|k| (q[k] - from[k] + to[k]) as f32))
+            .collect())
+    }
+}
+
 /// One imported signal: its index among the inputs and what the user
 /// calls it.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -179,6 +256,9 @@ pub struct ImportManifest {
     pub holdout: Holdout,
     /// The split's seed.
     pub seed: u64,
+    /// How the shapes were turned to face as the template does.
+    #[serde(default)]
+    pub align: Align,
     /// Every signal of the set, in order.
     pub signals: Vec<ImportedSignal>,
 }
@@ -245,6 +325,9 @@ pub struct ImportExperiment<'a> {
     pub reference_mesh: Option<(&'a TriMesh, &'a str)>,
     /// The split's seed.
     pub seed: u64,
+    /// Whether shapes are turned to face as the template does (only
+    /// position signals; [`Align::None`] for others).
+    pub align: Align,
     /// Input folder entries skipped before the import (for the summary).
     pub skipped: usize,
     /// Whether to show a progress bar.
@@ -273,6 +356,11 @@ impl ImportExperiment<'_> {
         let started = Instant::now();
         let source = self.source;
         let n = source.len();
+        if self.align != Align::None && !(source.positions() && source.channels() == 3) {
+            return Err(DataError::Config(
+                "--align turns shapes; these signals are not vertex positions".into(),
+            ));
+        }
         if n < 2 {
             return Err(DataError::Config(format!(
                 "{n} signal{} to import: a generative model needs at least 2",
@@ -322,6 +410,7 @@ impl ImportExperiment<'_> {
                 positions: source.positions(),
                 holdout: self.holdout,
                 seed: self.seed,
+                align: self.align,
                 signals,
             };
             serde_json::to_value(&params)
@@ -374,6 +463,7 @@ impl ImportExperiment<'_> {
             for (&i, signal) in indices.iter().zip(read) {
                 let signal = signal?;
                 checks.check(&signal, i, &source.name(i), c)?;
+                let signal = self.align.apply(self.template, &signal)?;
                 if held[i] {
                     if let (Some((holdout, on_reference)), Some((_, transfer, _, _))) =
                         (sets.as_mut(), reference.as_ref())
