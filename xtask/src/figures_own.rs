@@ -42,6 +42,10 @@ pub struct OwnArgs {
     /// Held-out shapes (`mfm dataset import --holdout`).
     #[arg(long, default_value = "every:8")]
     pub holdout: String,
+    /// Turn the shapes to face as the template does (`mfm dataset import
+    /// --align`: none, up:x|y|z, rigid).
+    #[arg(long, default_value = "none")]
+    pub align: String,
     /// Run preset (`mfm train --preset`), unless --config is given.
     #[arg(long, default_value = "cpu-deform")]
     pub preset: String,
@@ -145,6 +149,7 @@ fn run_one(mfm: &Mfm<'_>, args: &OwnArgs, dir: &Path, out: &Path) -> Result<Row>
         );
     }
     import.extend(["--holdout".into(), holdout, "--seed".into(), seed.clone()]);
+    import.extend(["--align".into(), args.align.clone()]);
     import.extend(["--out".into(), arg(&data)]);
     mfm.run(&import.iter().map(String::as_str).collect::<Vec<_>>())?;
     let summary: ImportSummary = serde_json::from_value(crate::flow_steps::read_json(
@@ -213,9 +218,10 @@ fn write_report(args: &OwnArgs, rows: &[Row], seconds: f64) -> String {
     let _ = writeln!(
         s,
         "# Own data: import, train, sample on a finer mesh, evaluate\n\n\
-         Holdout `{}`, {recipe}{}, {} samples on the reference mesh (the template with half of it \
-         refined twice), seed {}; {:.0} s in all.\n",
+         Holdout `{}`, align `{}`, {recipe}{}, {} samples on the reference mesh (the template \
+         with half of it refined twice), seed {}; {:.0} s in all.\n",
         args.holdout,
+        args.align,
         args.steps
             .map(|n| format!(", {n} steps"))
             .unwrap_or_default(),
