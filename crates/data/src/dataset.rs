@@ -180,24 +180,43 @@ pub struct Dataset {
 ///
 /// Cost: `O(V + F)`.
 pub fn mesh_identity(mesh: &TriMesh) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut feed = |bytes: &[u8]| {
-        for &b in bytes {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
-    };
+    let mut h = Fnv1a::new();
     for p in mesh.positions() {
         for x in p {
-            feed(&x.to_bits().to_le_bytes());
+            h.feed(&x.to_bits().to_le_bytes());
         }
     }
     for f in mesh.faces() {
         for i in f {
-            feed(&i.to_le_bytes());
+            h.feed(&i.to_le_bytes());
         }
     }
+    let h = h.finish();
     format!("V{}-F{}-{h:016x}", mesh.num_vertices(), mesh.num_faces())
+}
+
+/// The 64-bit FNV-1a hash of a stream of bytes: [`mesh_identity`]'s, and
+/// how an import tells a copy of an earlier signal.
+pub(crate) struct Fnv1a(u64);
+
+impl Fnv1a {
+    /// The hash of no bytes.
+    pub(crate) fn new() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+
+    /// Hashes `bytes` in.
+    pub(crate) fn feed(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 ^= u64::from(b);
+            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+
+    /// The hash so far.
+    pub(crate) fn finish(&self) -> u64 {
+        self.0
+    }
 }
 
 impl Dataset {

@@ -362,7 +362,7 @@ impl RigidTransform {
 }
 
 /// Weighted centroid `sum w p / sum w` (the caller guarantees `sum w > 0`).
-pub(crate) fn weighted_centroid(points: &[[f64; 3]], weights: &[f64]) -> [f64; 3] {
+pub fn weighted_centroid(points: &[[f64; 3]], weights: &[f64]) -> [f64; 3] {
     let mut c = [0.0; 3];
     let mut total = 0.0;
     for (p, &w) in points.iter().zip(weights) {

@@ -151,19 +151,34 @@ pub struct ImportedShapes {
     pub real_bending: Vec<f64>,
 }
 
+impl ImportedShapes {
+    /// The [`ShapeSets`] of these real shapes, the held-out ones on `mesh`
+    /// and `samples`.
+    pub fn sets<'a>(
+        &'a self,
+        mesh: &'a TriMesh,
+        held_out: &'a InMemorySignals,
+        samples: &'a InMemorySignals,
+    ) -> ShapeSets<'a> {
+        ShapeSets {
+            mesh,
+            train: &self.train,
+            held_out,
+            samples,
+            diagonal: self.diagonal,
+            seed: self.seed,
+            real_bending: Some(&self.real_bending),
+        }
+    }
+}
+
 impl Evaluation {
     /// The [`ShapeSets`] of an imported shape set and `samples` (`None`
     /// for other sets).
     pub fn shape_sets<'a>(&'a self, samples: &'a InMemorySignals) -> Option<ShapeSets<'a>> {
-        self.imported.as_ref().map(|i| ShapeSets {
-            mesh: &self.mesh,
-            train: &i.train,
-            held_out: &self.reference,
-            samples,
-            diagonal: i.diagonal,
-            seed: i.seed,
-            real_bending: Some(&i.real_bending),
-        })
+        self.imported
+            .as_ref()
+            .map(|i| i.sets(&self.mesh, &self.reference, samples))
     }
 }
 
@@ -219,17 +234,9 @@ pub fn evaluate(reference: &Dataset, generated: &InMemorySignals) -> Result<Eval
     };
     let (shape_quality, imported) = match ImportManifest::of(reference)? {
         Some(m) if m.positions && generated.channels() == 3 => {
-            let imported = imported_shapes(reference, m.seed)?;
-            let q = shape_quality::shape_quality(&ShapeSets {
-                mesh: &mesh,
-                train: &imported.train,
-                held_out: &reference_signals,
-                samples: generated,
-                diagonal: imported.diagonal,
-                seed: m.seed,
-                real_bending: Some(&imported.real_bending),
-            })?;
-            (Some(q), Some(imported))
+            let imported = imported_shapes(reference, &m)?;
+            let sets = imported.sets(&mesh, &reference_signals, generated);
+            (Some(shape_quality::shape_quality(&sets)?), Some(imported))
         }
         _ => (None, None),
     };
@@ -278,18 +285,18 @@ fn experiment_of(dataset: &Dataset) -> Result<&Path> {
     })
 }
 
-/// The real shapes of the imported experiment `reference` belongs to: the
+/// The real shapes of the imported experiment `reference` belongs to (`m`
+/// its import record): the
 /// training set carried to the reference mesh by the experiment's
 /// transfer (as it is for the held-out set on the template), the
 /// template's diagonal, and the bending energies of the
 /// training and held-out shapes on the template, where they were given.
-fn imported_shapes(reference: &Dataset, seed: u64) -> Result<ImportedShapes> {
+fn imported_shapes(reference: &Dataset, m: &ImportManifest) -> Result<ImportedShapes> {
     let dir = experiment_of(reference)?;
     let train = Dataset::open(dir.join(mfm_data::layout::TRAIN))?;
     let holdout = Dataset::open(dir.join(mfm_data::layout::HOLDOUT))?;
     // the held-out set on the template needs no transfer
-    let on_template = ImportManifest::of(reference)?.is_some_and(|m| m.mesh_role == "template");
-    let transfer = if on_template {
+    let transfer = if m.mesh_role == "template" {
         None
     } else {
         let transfer = Transfer::read(&dir.join(import::TRANSFER), train.num_vertices())?;
@@ -336,7 +343,7 @@ fn imported_shapes(reference: &Dataset, seed: u64) -> Result<ImportedShapes> {
     Ok(ImportedShapes {
         train,
         diagonal,
-        seed,
+        seed: m.seed,
         real_bending,
     })
 }

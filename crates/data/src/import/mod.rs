@@ -196,12 +196,13 @@ impl std::str::FromStr for Align {
 
 impl Align {
     /// `positions` (`V x 3` values of the template's vertices) turned as
-    /// `self` says, their mass-weighted centroid kept.
+    /// `self` says, their centroid weighted by `mass` (the template's
+    /// lumped mass) kept.
     ///
     /// # Errors
     /// [`DataError::Deform`] for shapes the fit cannot take (not finite, a
     /// template without mass).
-    pub fn apply(self, template: &TriMesh, values: &[f32]) -> Result<Vec<f32>> {
+    pub fn apply(self, template: &TriMesh, mass: &[f64], values: &[f32]) -> Result<Vec<f32>> {
         if self == Self::None {
             return Ok(values.to_vec());
         }
@@ -214,18 +215,8 @@ impl Align {
             _ => mfm_deform::align_rigid(template, &p, template.positions())?,
         };
         // both fits move the centroid onto the template's: put it back
-        let mass = mfm_geometry::operators::lumped_mass(template);
-        let centroid = |q: &[[f64; 3]]| {
-            let total: f64 = mass.iter().sum();
-            let mut c = [0.0; 3];
-            for (x, m) in q.iter().zip(&mass) {
-                for k in 0..3 {
-                    c[k] += m * x[k] / total;
-                }
-            }
-            c
-        };
-        let (from, to) = (centroid(&turned), centroid(&p));
+        let from = mfm_deform::rigid::weighted_centroid(&turned, mass);
+        let to = mfm_deform::rigid::weighted_centroid(&p, mass);
         Ok(turned
             .iter()
             .flat_map(|q| [0, 1, 2].map(|k| (q[k] - from[k] + to[k]) as f32))
@@ -452,6 +443,11 @@ impl ImportExperiment<'_> {
                 DatasetWriter::create(out.join(REFERENCE), mesh, reference_manifest, num_held, c)?;
             sets = Some((holdout, on_reference));
         }
+        let mass = if self.align == Align::None {
+            Vec::new()
+        } else {
+            mfm_geometry::operators::lumped_mass(self.template)
+        };
         let bar = progress_bar(self.progress, n, v);
         let mut checks = SignalChecks::new(self.template, source.positions());
         for first in (0..n).step_by(CHUNK) {
@@ -463,7 +459,7 @@ impl ImportExperiment<'_> {
             for (&i, signal) in indices.iter().zip(read) {
                 let signal = signal?;
                 checks.check(&signal, i, &source.name(i), c)?;
-                let signal = self.align.apply(self.template, &signal)?;
+                let signal = self.align.apply(self.template, &mass, &signal)?;
                 if held[i] {
                     if let (Some((holdout, on_reference)), Some((_, transfer, _, _))) =
                         (sets.as_mut(), reference.as_ref())
@@ -660,16 +656,13 @@ impl SignalChecks {
     }
 }
 
-/// A 64-bit FNV-1a hash of the values' bits (copies have equal hashes).
+/// The FNV-1a hash of the values' bits (copies have equal hashes).
 fn fnv(values: &[f32]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut h = crate::dataset::Fnv1a::new();
     for x in values {
-        for b in x.to_bits().to_le_bytes() {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
+        h.feed(&x.to_bits().to_le_bytes());
     }
-    h
+    h.finish()
 }
 
 /// The import's progress bar (hidden unless `show`).
