@@ -695,8 +695,9 @@ impl DatasetWriter {
             mfm_files::interrupt::remove_stale_temporaries(&parent, Some(name));
         }
         let temp = sibling(&dir, "tmp");
-        std::fs::create_dir(&temp).map_err(|e| DataError::io(&temp, e))?;
+        // registered before it exists: no moment leaves it unregistered
         let registered = mfm_files::interrupt::TemporaryDir::register(&temp);
+        std::fs::create_dir(&temp).map_err(|e| DataError::io(&temp, e))?;
         let mut writer = Self {
             dir,
             temp,

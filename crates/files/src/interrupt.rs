@@ -90,10 +90,23 @@ fn remove(what: &Pending) {
         Pending::File(p) => {
             let _ = std::fs::remove_file(p);
         }
-        Pending::Dir(p) => {
-            let _ = std::fs::remove_dir_all(p);
-        }
+        Pending::Dir(p) => remove_dir_being_written(p),
         Pending::Undo { owned, created } => crate::undo::remove(owned.as_deref(), created),
+    }
+}
+
+/// Removes the folder `dir` that another thread of this process may still
+/// be writing into (a checkpoint being filled when the second Ctrl-C
+/// comes): a file created after `remove_dir_all` listed the folder makes
+/// its last step fail, so it is tried again until the folder is gone (the
+/// writer makes a bounded number of files; at most 200 tries, 1 ms apart).
+fn remove_dir_being_written(dir: &std::path::Path) {
+    for _ in 0..200 {
+        match std::fs::remove_dir_all(dir) {
+            Ok(()) => return,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return,
+            Err(_) => std::thread::sleep(std::time::Duration::from_millis(1)),
+        }
     }
 }
 

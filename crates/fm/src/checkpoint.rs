@@ -572,9 +572,10 @@ pub fn write_checkpoint(
     if tmp.exists() {
         std::fs::remove_dir_all(&tmp).map_err(|e| FmError::io(&tmp, e))?;
     }
-    std::fs::create_dir(&tmp).map_err(|e| FmError::io(&tmp, e))?;
     // an interrupt that kills the process before the rename removes it
+    // (registered before it exists, so no moment leaves it unregistered)
     let _interruptible = mfm_files::interrupt::TemporaryDir::register(&tmp);
+    std::fs::create_dir(&tmp).map_err(|e| FmError::io(&tmp, e))?;
     fill(&tmp)?;
     let mut files = BTreeMap::new();
     for entry in std::fs::read_dir(&tmp).map_err(|e| FmError::io(&tmp, e))? {
