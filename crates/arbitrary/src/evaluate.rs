@@ -175,7 +175,9 @@ pub fn evaluate_set(
     let data = Dataset::open(set)?;
     let Some(manifest) = PairsManifest::of(&data)? else {
         return Err(FmError::Config(format!(
-            "{} is not a pairs dataset",
+            "{} is not a pairs dataset made by `mfm dataset pairs`: this evaluation measures \
+             targets against the pose space that made them (imported pairs have none; judge \
+             their samples with `mfm eval --reference`)",
             set.display()
         )));
     };

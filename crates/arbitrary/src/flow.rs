@@ -23,9 +23,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use mfm_data::SignalSource;
 use mfm_data::dataset::Dataset;
-use mfm_data::pairs::PairsManifest;
+use mfm_data::pairs::training_pairs;
 use mfm_geometry::TriMesh;
 use mfm_geometry::frame::SurfaceSize;
 use mfm_net::{HeadKind, PoissonNet, PoissonNetConfig, loss};
@@ -217,9 +216,10 @@ pub fn train(
     progress: bool,
 ) -> Result<TrainReport> {
     let data = Dataset::open(dataset)?;
-    let Some(manifest) = PairsManifest::of(&data)? else {
+    let Some(pairs) = training_pairs(&data)? else {
         return Err(FmError::Config(format!(
-            "{} is not a pairs dataset (made by `mfm dataset pairs`); the arbitrary-source \
+            "{} is not a pairs dataset (made by `mfm dataset pairs`, or imported from the \
+             authors' arbitrary-source file by `mfm dataset import`); the arbitrary-source \
              model trains on (source, target) pairs",
             dataset.display()
         )));
@@ -291,7 +291,6 @@ pub fn train(
     let predictor = load_copied_predictor(run_dir)?;
     let k = predictor.eigenvectors();
     let meshes = data.load_all()?;
-    let pairs = manifest.space.pairs(meshes.len());
     if pairs.is_empty() {
         return Err(FmError::Config(format!(
             "{} has no pairs (one pose per shape?)",

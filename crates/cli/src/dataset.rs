@@ -50,7 +50,8 @@ pub enum DatasetCommand {
     /// them in natural order: 2.obj before 10.obj), per-vertex signals
     /// (--signals X.npy --mesh T, or PLY vertex properties with
     /// --property), or the authors' dataset file (a .pt with src_verts,
-    /// tar_verts, faces). Writes OUT/train (a dataset folder on the
+    /// tar_verts, faces; with one src_verts per target, the (source,
+    /// target) pairs of the arbitrary-source model). Writes OUT/train (a dataset folder on the
     /// template that `mfm train` uses as it is) and, with --holdout,
     /// OUT/holdout (held-out signals on the template), OUT/reference (the
     /// same on another triangulation of its surface) and OUT/transfer.npy;
@@ -76,7 +77,7 @@ pub struct ImportArgs {
     template: Option<PathBuf>,
     /// Held-out signals: a count (8), a percentage (12.5%) drawn with
     /// --seed, or every:K (inputs K-1, 2K-1, ...: every K-th frame of a
-    /// sequence). Default: none.
+    /// sequence); whole pairs of an arbitrary-source file. Default: none.
     #[arg(long)]
     holdout: Option<String>,
     /// The reference mesh for the held-out signals: another triangulation
@@ -463,7 +464,7 @@ fn with_areas(
 fn dataset_import(a: ImportArgs) -> Result<()> {
     use mfm_data::import::authors::read_authors_dataset;
     use mfm_data::import::inputs::list_mesh_files;
-    use mfm_data::import::sources::{MeshFiles, NpyRows};
+    use mfm_data::import::sources::{MeshFiles, NpyRows, PairedShapes};
     use mfm_data::import::{Align, Holdout, ImportExperiment, SignalFiles};
     let holdout: Holdout = match &a.holdout {
         Some(h) => h.parse()?,
@@ -492,6 +493,7 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
     let _lock = crate::output::lock_folder(&a.out)?;
     ensure_empty(&a.out)?;
     let mut skipped = 0;
+    let mut paired = false;
     let (template, template_name, source): (mfm_geometry::TriMesh, String, Box<dyn SignalFiles>) =
         if let Some(array) = &a.signals {
             let spec = a.mesh.clone().unwrap_or_default();
@@ -517,17 +519,17 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
                 );
             }
             let data = read_authors_dataset(path)?;
-            if data.sources.is_some() {
-                bail!(
-                    "{}: src_verts holds one source per target (the authors' arbitrary-source \
-                     format); mfm's arbitrary-source training reads pose pairs of `mfm dataset \
-                     pairs` and cannot take these pairs yet. A single-source file has src_verts \
-                     [V, 3].",
-                    path.display()
-                );
-            }
             let name = format!("{}:src_verts", path.display());
-            (data.template, name, Box::new(data.targets))
+            match data.sources {
+                // the arbitrary-source format: one source per target
+                Some(sources) => {
+                    paired = true;
+                    let name = format!("{name}[0]");
+                    let pairs = PairedShapes::new(sources, data.targets)?;
+                    (data.template, name, Box::new(pairs))
+                }
+                None => (data.template, name, Box::new(data.targets)),
+            }
         } else {
             if let Some(p) = a.inputs.iter().find(|p| is_torch(p)) {
                 bail!(
@@ -561,15 +563,24 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
         }
         None => None,
     };
-    println!(
-        "template {template_name}: {} vertices, {} faces; {} signal{} of {} channel{}",
-        template.num_vertices(),
-        template.num_faces(),
-        source.len(),
-        if source.len() == 1 { "" } else { "s" },
-        source.channels(),
-        if source.channels() == 1 { "" } else { "s" }
-    );
+    if paired {
+        println!(
+            "template {template_name}: {} vertices, {} faces; {} (source, target) pairs",
+            template.num_vertices(),
+            template.num_faces(),
+            source.len() / 2
+        );
+    } else {
+        println!(
+            "template {template_name}: {} vertices, {} faces; {} signal{} of {} channel{}",
+            template.num_vertices(),
+            template.num_faces(),
+            source.len(),
+            if source.len() == 1 { "" } else { "s" },
+            source.channels(),
+            if source.channels() == 1 { "" } else { "s" }
+        );
+    }
     let summary = ImportExperiment {
         source: source.as_ref(),
         template: &template,
@@ -578,6 +589,7 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
         reference_mesh: reference.as_ref().map(|(m, s)| (m, s.as_str())),
         seed: a.seed,
         align,
+        pairs: paired,
         skipped,
         progress: true,
     }
@@ -589,12 +601,24 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
     if let (Some([v, f]), Some(name)) = (summary.reference_size, &summary.reference_mesh) {
         println!("reference mesh ({name}): {v} vertices, {f} faces");
     }
-    println!(
-        "wrote {} ({} training, {} held out) in {:.1} s",
-        a.out.display(),
-        summary.train,
-        summary.held_out,
-        summary.seconds
-    );
+    if paired {
+        println!(
+            "wrote {} ({} training pairs, {} held out) in {:.1} s; train the arbitrary-source \
+             model on {}/train (`mfm train --mode predictor`, then `--mode arbitrary`)",
+            a.out.display(),
+            summary.train / 2,
+            summary.held_out / 2,
+            summary.seconds,
+            a.out.display()
+        );
+    } else {
+        println!(
+            "wrote {} ({} training, {} held out) in {:.1} s",
+            a.out.display(),
+            summary.train,
+            summary.held_out,
+            summary.seconds
+        );
+    }
     Ok(())
 }

@@ -391,3 +391,125 @@ fn imported_shapes_train_sample_and_come_back_in_the_users_units() {
         "{out}"
     );
 }
+
+/// Writes `DIR/pairs.pt`, the authors' arbitrary-source format, with
+/// `torch.save` in the project's Python environment: pair `i` goes from
+/// frame `i` of [`frame`] to frame `i + 3`, on the capsule's faces
+/// (`None` without the environment).
+fn write_authors_pairs(dir: &Path, pairs: usize) -> Option<()> {
+    let python = mfm_geometry::test_support::python_oracle()?;
+    let rest = procedural::capsule(0.3, 0.8, 10, 20).unwrap();
+    let coordinates = |k: usize| -> Vec<u8> {
+        frame(&rest, k)
+            .positions()
+            .iter()
+            .flat_map(|p| p.iter().flat_map(|&x| (x as f32).to_le_bytes()))
+            .collect()
+    };
+    let src: Vec<u8> = (0..pairs).flat_map(coordinates).collect();
+    let tar: Vec<u8> = (0..pairs).flat_map(|i| coordinates(i + 3)).collect();
+    let faces: Vec<u8> = rest
+        .faces()
+        .iter()
+        .flat_map(|f| f.iter().flat_map(|&i| i64::from(i).to_le_bytes()))
+        .collect();
+    std::fs::write(dir.join("src.bin"), src).unwrap();
+    std::fs::write(dir.join("tar.bin"), tar).unwrap();
+    std::fs::write(dir.join("faces.bin"), faces).unwrap();
+    let script = format!(
+        "import numpy as np, torch\n\
+         v = {v}\n\
+         src = torch.from_numpy(np.fromfile('src.bin', np.float32).reshape({pairs}, v, 3))\n\
+         tar = torch.from_numpy(np.fromfile('tar.bin', np.float32).reshape({pairs}, v, 3))\n\
+         faces = torch.from_numpy(np.fromfile('faces.bin', np.int64).reshape(-1, 3))\n\
+         torch.save({{'src_verts': src, 'tar_verts': tar, 'faces': faces}}, 'pairs.pt')\n",
+        v = rest.num_vertices()
+    );
+    let o = Command::new(python)
+        .current_dir(dir)
+        .args(["-c", &script])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", err(&o));
+    Some(())
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn the_authors_arbitrary_source_pairs_train_the_arbitrary_source_model() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    if write_authors_pairs(d, 8).is_none() {
+        eprintln!("skipped: no Python environment with torch (cargo xtask setup)");
+        return;
+    }
+    let out = stdout_of(
+        d,
+        &[
+            "dataset",
+            "import",
+            "pairs.pt",
+            "--holdout",
+            "2",
+            "--out",
+            "data",
+        ],
+    );
+    assert!(out.contains("8 (source, target) pairs"), "{out}");
+    assert!(out.contains("6 training pairs, 2 held out"), "{out}");
+    assert!(out.contains("--mode arbitrary"), "{out}");
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("data/import.json")).unwrap())
+            .unwrap();
+    assert_eq!(summary["pairs"], true);
+    assert_eq!(summary["train"], 12);
+    let quick = ["--steps", "2", "--quiet"];
+    ok(
+        d,
+        &[
+            &["train", "--mode", "predictor", "--dataset", "data/train"][..],
+            &["--out", "pred"],
+            &quick,
+        ]
+        .concat(),
+    );
+    ok(
+        d,
+        &[
+            &["train", "--mode", "arbitrary", "--dataset", "data/train"][..],
+            &["--predictor", "pred", "--out", "arb"],
+            &quick,
+        ]
+        .concat(),
+    );
+    // the template (the first pair's source) as a source gives a target
+    ok(
+        d,
+        &[
+            "sample",
+            "--run",
+            "arb",
+            "--source",
+            "data/holdout/mesh.ply",
+            "--n",
+            "1",
+            "--out",
+            "targets",
+        ],
+    );
+    assert!(d.join("targets/samples.npy").is_file());
+    // a set of single shapes is not a pairs set: named as such
+    write_frames(d, 6);
+    ok(d, &["dataset", "import", "frames", "--out", "single"]);
+    let e = refused(
+        d,
+        &[
+            &["train", "--mode", "arbitrary", "--dataset", "single/train"][..],
+            &["--predictor", "pred", "--out", "arb2"],
+            &quick,
+        ]
+        .concat(),
+        "is not a pairs dataset",
+    );
+    assert!(e.contains("arbitrary-source file"), "{e}");
+}

@@ -38,6 +38,7 @@ use mfm_geometry::frame::CanonicalFrame;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::SignalSource;
 use crate::dataset::{Dataset, Manifest};
 use crate::deformations::Normalization;
 use crate::error::{DataError, Result};
@@ -206,6 +207,39 @@ impl PairSpace {
                 })
             })
             .collect()
+    }
+}
+
+/// The ordered (source, target) mesh pairs the arbitrary-source model
+/// trains on, for either kind of pairs dataset: one made by `mfm dataset
+/// pairs` (every two different poses of one shape, [`PairSpace::pairs`])
+/// or one imported from the authors' arbitrary-source file (mesh `2 i` is
+/// the source of pair `i`, mesh `2 i + 1` its target,
+/// [`crate::import::ImportManifest::pairs`]). `None` for a dataset of
+/// single shapes.
+///
+/// # Errors
+/// [`DataError::Files`] (`Format`) naming the manifest when its record does
+/// not parse, or an imported pairs set with an odd number of meshes.
+pub fn training_pairs(dataset: &Dataset) -> Result<Option<Vec<(usize, usize)>>> {
+    let meshes = dataset.len();
+    if let Some(manifest) = PairsManifest::of(dataset)? {
+        return Ok(Some(manifest.space.pairs(meshes)));
+    }
+    match crate::import::ImportManifest::of(dataset)? {
+        Some(import) if import.pairs => {
+            if meshes % 2 != 0 {
+                return Err(DataError::format(
+                    dataset.dir().join(crate::dataset::MANIFEST_FILE),
+                    format!(
+                        "records (source, target) pairs but the set holds {meshes} meshes, an \
+                         odd number"
+                    ),
+                ));
+            }
+            Ok(Some((0..meshes / 2).map(|i| (2 * i, 2 * i + 1)).collect()))
+        }
+        _ => Ok(None),
     }
 }
 

@@ -11,11 +11,12 @@ use mfm_data::SignalSource;
 use mfm_data::dataset::Dataset;
 use mfm_data::import::authors::read_authors_dataset;
 use mfm_data::import::inputs::list_mesh_files;
-use mfm_data::import::sources::{MeshFiles, NpyRows};
+use mfm_data::import::sources::{MeshFiles, NpyRows, PairedShapes, ShapesInMemory};
 use mfm_data::import::{
     Holdout, ImportExperiment, ImportManifest, ImportSummary, SUMMARY, SignalFiles, TRANSFER,
 };
 use mfm_data::layout::{HOLDOUT, PREVIEW, REFERENCE, TRAIN};
+use mfm_data::pairs::training_pairs;
 use mfm_data::transfer::Transfer;
 use mfm_geometry::TriMesh;
 use mfm_geometry::procedural;
@@ -72,6 +73,7 @@ fn import(
         reference_mesh: reference,
         seed: 0,
         align: Default::default(),
+        pairs: false,
         skipped: 0,
         progress: false,
     }
@@ -391,9 +393,65 @@ fn the_authors_dataset_files_read_as_shapes() {
     .unwrap();
     assert_eq!((s.train, s.held_out), (4, 2));
 
+    // one source per target: (source, target) pairs, held out whole
     let pairs = read_authors_dataset(&tmp.path().join("pairs.pt")).unwrap();
-    let sources = pairs.sources.unwrap();
+    let sources = pairs.sources.clone().unwrap();
     assert_eq!(sources.values[..12], expect[5 * 12..]);
+    let paired = PairedShapes::new(sources, pairs.targets.clone()).unwrap();
+    assert_eq!(paired.len(), 12);
+    let data = tmp.path().join("pairs");
+    let s = ImportExperiment {
+        source: &paired,
+        template: &pairs.template,
+        template_name: "pairs.pt",
+        holdout: Holdout::Count(2),
+        reference_mesh: None,
+        seed: 0,
+        align: Default::default(),
+        pairs: true,
+        skipped: 0,
+        progress: false,
+    }
+    .write(&data)
+    .unwrap();
+    assert_eq!((s.train, s.held_out, s.pairs), (8, 4, true));
+    // the sources repeat the targets (flipped): not copies
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    for (set, count) in [(TRAIN, 4), (HOLDOUT, 2)] {
+        let d = Dataset::open(data.join(set)).unwrap();
+        let record = ImportManifest::of(&d).unwrap().unwrap();
+        assert!(record.pairs);
+        let want: Vec<(usize, usize)> = (0..count).map(|i| (2 * i, 2 * i + 1)).collect();
+        assert_eq!(training_pairs(&d).unwrap().unwrap(), want);
+        let all = d.load_all().unwrap();
+        for (k, signal) in record.signals.iter().enumerate() {
+            // mesh 2i is pair i's source (row N-1-i of tar_verts), 2i+1 its target
+            assert_eq!(signal.index % 2, k % 2);
+            let pair = signal.index / 2;
+            let row = if k % 2 == 0 { 5 - pair } else { pair };
+            let side = if k % 2 == 0 { "src_verts" } else { "tar_verts" };
+            assert!(
+                signal.name.ends_with(&format!("{side}[{pair}]")),
+                "{}",
+                signal.name
+            );
+            assert_eq!(
+                all.signal(k),
+                &expect[12 * row..12 * (row + 1)],
+                "{set} mesh {k}"
+            );
+        }
+    }
+    // a set of single shapes has no pairs
+    let single = Dataset::open(tmp.path().join("data").join(TRAIN)).unwrap();
+    assert_eq!(training_pairs(&single).unwrap(), None);
+    let odd = ShapesInMemory {
+        source: "odd".into(),
+        values: vec![0.0; 12],
+        vertices: 4,
+    };
+    let err = PairedShapes::new(odd, pairs.targets).unwrap_err();
+    assert!(err.to_string().contains("one source per target"), "{err}");
     let err = read_authors_dataset(&tmp.path().join("missing.pt")).unwrap_err();
     assert!(err.to_string().contains("\"tar_verts\""), "{err}");
 }
@@ -526,6 +584,7 @@ fn shapes_turned_about_the_vertical_are_turned_back() {
         reference_mesh: None,
         seed: 0,
         align: "up:y".parse().unwrap(),
+        pairs: false,
         skipped: 0,
         progress: false,
     }

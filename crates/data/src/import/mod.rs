@@ -250,6 +250,12 @@ pub struct ImportManifest {
     /// How the shapes were turned to face as the template does.
     #[serde(default)]
     pub align: Align,
+    /// Whether the shapes are (source, target) pairs for the
+    /// arbitrary-source model (the authors' arbitrary-source file): shape
+    /// `2 i` is the source of pair `i`, shape `2 i + 1` its target
+    /// ([`crate::pairs::training_pairs`]).
+    #[serde(default)]
+    pub pairs: bool,
     /// Every signal of the set, in order.
     pub signals: Vec<ImportedSignal>,
 }
@@ -289,6 +295,10 @@ pub struct ImportSummary {
     pub train: usize,
     /// Held-out signals.
     pub held_out: usize,
+    /// Whether the signals are (source, target) pairs, two signals each
+    /// ([`ImportManifest::pairs`]).
+    #[serde(default)]
+    pub pairs: bool,
     /// Input folder entries skipped as not mesh files.
     pub skipped: usize,
     /// Warnings about data that is still usable.
@@ -319,6 +329,10 @@ pub struct ImportExperiment<'a> {
     /// Whether shapes are turned to face as the template does (only
     /// position signals; [`Align::None`] for others).
     pub align: Align,
+    /// Whether the signals are (source, target) pairs, source first
+    /// ([`sources::PairedShapes`]): the split holds out whole pairs and
+    /// repeated sources are not copies.
+    pub pairs: bool,
     /// Input folder entries skipped before the import (for the summary).
     pub skipped: usize,
     /// Whether to show a progress bar.
@@ -352,6 +366,11 @@ impl ImportExperiment<'_> {
                 "--align turns shapes; these signals are not vertex positions".into(),
             ));
         }
+        if self.pairs && !(source.positions() && source.channels() == 3 && n % 2 == 0) {
+            return Err(DataError::Config(
+                "pairs are (source, target) shapes, two position signals each".into(),
+            ));
+        }
         if n < 2 {
             return Err(DataError::Config(format!(
                 "{n} signal{} to import: a generative model needs at least 2",
@@ -359,7 +378,13 @@ impl ImportExperiment<'_> {
             )));
         }
         let mut warnings = check_template(self.template, self.template_name)?;
-        let held = self.holdout.held_out(n, self.seed)?;
+        let held = if self.pairs {
+            // whole pairs: both shapes of a held-out pair are held out
+            let pairs = self.holdout.held_out(n / 2, self.seed)?;
+            (0..n).map(|i| pairs[i / 2]).collect()
+        } else {
+            self.holdout.held_out(n, self.seed)?
+        };
         let num_held = held.iter().filter(|&&h| h).count();
         let c = source.channels();
         let v = self.template.num_vertices();
@@ -402,6 +427,7 @@ impl ImportExperiment<'_> {
                 holdout: self.holdout,
                 seed: self.seed,
                 align: self.align,
+                pairs: self.pairs,
                 signals,
             };
             serde_json::to_value(&params)
@@ -458,7 +484,9 @@ impl ImportExperiment<'_> {
                 .collect();
             for (&i, signal) in indices.iter().zip(read) {
                 let signal = signal?;
-                checks.check(&signal, i, &source.name(i), c)?;
+                // a source repeated over its pairs is not a copy
+                let copies = !(self.pairs && i % 2 == 0);
+                checks.check(&signal, i, &source.name(i), c, copies)?;
                 let signal = self.align.apply(self.template, &mass, &signal)?;
                 if held[i] {
                     if let (Some((holdout, on_reference)), Some((_, transfer, _, _))) =
@@ -499,6 +527,7 @@ impl ImportExperiment<'_> {
             positions: source.positions(),
             train: n - num_held,
             held_out: num_held,
+            pairs: self.pairs,
             skipped: self.skipped,
             warnings,
             seconds: started.elapsed().as_secs_f64(),
@@ -586,8 +615,16 @@ impl SignalChecks {
         }
     }
 
-    /// Refuses a value that is not finite; notes copies and other units.
-    fn check(&mut self, signal: &[f32], index: usize, name: &str, channels: usize) -> Result<()> {
+    /// Refuses a value that is not finite; notes copies (when `copies`)
+    /// and other units.
+    fn check(
+        &mut self,
+        signal: &[f32],
+        index: usize,
+        name: &str,
+        channels: usize,
+        copies: bool,
+    ) -> Result<()> {
         let v = signal.len() / channels.max(1);
         if let Some((_, vertex, channel, x)) = crate::signals::first_non_finite(signal, v, channels)
         {
@@ -603,11 +640,13 @@ impl SignalChecks {
                 ),
             ));
         }
-        let hash = fnv(signal);
-        match self.seen.get(&hash) {
-            Some(&earlier) => self.copies.push((index, earlier)),
-            None => {
-                self.seen.insert(hash, index);
+        if copies {
+            let hash = fnv(signal);
+            match self.seen.get(&hash) {
+                Some(&earlier) => self.copies.push((index, earlier)),
+                None => {
+                    self.seen.insert(hash, index);
+                }
             }
         }
         if self.positions && channels == 3 {

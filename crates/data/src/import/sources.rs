@@ -343,3 +343,68 @@ impl SignalFiles for ShapesInMemory {
         Ok(self.values[i * row..(i + 1) * row].to_vec())
     }
 }
+
+/// (source, target) shape pairs held in memory (the authors'
+/// arbitrary-source file: `src_verts` and `tar_verts`, both `[N, V, 3]`),
+/// read as `2 N` shapes: shape `2 i` is the source of pair `i`, shape
+/// `2 i + 1` its target (see [`super::ImportManifest::pairs`]).
+#[derive(Clone, Debug)]
+pub struct PairedShapes {
+    /// The sources, one per pair.
+    pub sources: ShapesInMemory,
+    /// The targets, one per pair.
+    pub targets: ShapesInMemory,
+}
+
+impl PairedShapes {
+    /// Pairs `sources[i]` with `targets[i]`.
+    ///
+    /// # Errors
+    /// [`DataError::Config`] when the two hold different numbers of shapes
+    /// or of vertices.
+    pub fn new(sources: ShapesInMemory, targets: ShapesInMemory) -> Result<Self> {
+        if sources.len() != targets.len() || sources.vertices != targets.vertices {
+            return Err(DataError::Config(format!(
+                "{} holds {} shapes of {} vertices and {} holds {} of {}: pairs need one source \
+                 per target",
+                sources.source,
+                sources.len(),
+                sources.vertices,
+                targets.source,
+                targets.len(),
+                targets.vertices
+            )));
+        }
+        Ok(Self { sources, targets })
+    }
+
+    fn side(&self, i: usize) -> &ShapesInMemory {
+        if i % 2 == 0 {
+            &self.sources
+        } else {
+            &self.targets
+        }
+    }
+}
+
+impl SignalFiles for PairedShapes {
+    fn len(&self) -> usize {
+        2 * self.targets.len()
+    }
+
+    fn channels(&self) -> usize {
+        3
+    }
+
+    fn positions(&self) -> bool {
+        true
+    }
+
+    fn name(&self, i: usize) -> String {
+        self.side(i).name(i / 2)
+    }
+
+    fn read(&self, i: usize, template: &TriMesh) -> Result<Vec<f32>> {
+        self.side(i).read(i / 2, template)
+    }
+}
