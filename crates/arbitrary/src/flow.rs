@@ -43,7 +43,7 @@ use mfm_fm::seeding::derived_rng;
 use mfm_fm::{FmError, Result};
 
 /// The flow run's description.
-pub const ARBITRARY_SPEC: &str = "arbitrary.json";
+pub const ARBITRARY_SPEC: &str = mfm_files::owned::RUN_SPECS[1];
 /// The frozen predictor's weights, copied into the flow run.
 pub const PREDICTOR_WEIGHTS: &str = "predictor.safetensors";
 /// The copied predictor's description.

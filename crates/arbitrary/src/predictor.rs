@@ -33,7 +33,7 @@ use mfm_fm::seeding::derived_rng;
 use mfm_fm::{FmError, Result};
 
 /// The predictor run's description.
-pub const PREDICTOR_SPEC: &str = "predictor.json";
+pub const PREDICTOR_SPEC: &str = mfm_files::owned::RUN_SPECS[0];
 /// The training targets, `[V, k]` f64.
 pub const TARGETS_FILE: &str = "targets.npy";
 

@@ -7,7 +7,7 @@ use clap::Args;
 use mfm_fm::checkpoint::CONFIG_FILE;
 use mfm_fm::config::{DeviceChoice, OdeMethod, RunConfig};
 use mfm_fm::run_folder::{Overrides, RunFolder};
-use mfm_fm::sample::{SAMPLE_FILES, Sampler};
+use mfm_fm::sample::{SAMPLE_FILES, SampleOptions, Sampler};
 use mfm_fm::sample_folder::{SampleFolder, check_output_folder, run_sample_options};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -165,6 +165,9 @@ pub fn train(a: TrainArgs) -> Result<()> {
                 "mfm: warning: cannot install the Ctrl-C handler ({e}); Ctrl-C will lose the steps since the last checkpoint"
             );
         }
+    }
+    if !a.resume {
+        refuse_run_inside(&a.out, a.dataset.as_deref())?;
     }
     let lock = crate::output::lock_folder(&a.out)?;
     if a.mode != crate::arbitrary::TrainMode::Flow {
@@ -392,7 +395,20 @@ pub fn sample(a: SampleArgs) -> Result<()> {
             "warning: {mesh_arg}: {w}; the run's frame assumes the sampling mesh is the training surface in the dataset's units"
         );
     }
-    let mut opts = run_sample_options(&a.run);
+    let mut opts = match run_sample_options(&a.run)? {
+        Some(o) => o,
+        None => {
+            let d = SampleOptions::default();
+            eprintln!(
+                "warning: {} has no {CONFIG_FILE}: integrating with the defaults ({} {} steps; \
+                 --steps and --method choose others)",
+                a.run.display(),
+                d.steps,
+                format!("{:?}", d.method).to_lowercase()
+            );
+            d
+        }
+    };
     if let Some(s) = a.steps {
         if s == 0 {
             bail!("--steps must be at least 1");
@@ -405,6 +421,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     let folder = SampleFolder {
         run: &a.run,
         mesh_file: mesh_path(mesh_arg),
+        start_file: a.x0.as_deref(),
         out: &a.out,
         count,
         seed: a.seed,
@@ -427,5 +444,23 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         opts.method,
         a.out.display()
     );
+    Ok(())
+}
+
+/// Refuses a new run folder `out` inside the dataset it trains on or in a
+/// folder another command owns (a dataset, an experiment, a run's
+/// checkpoints): the README's rule for every writer.
+fn refuse_run_inside(out: &Path, dataset: Option<&Path>) -> Result<()> {
+    use mfm_files::guard::absolute_resolved;
+    if let Some(data) = dataset.filter(|d| d.is_dir())
+        && absolute_resolved(out).starts_with(absolute_resolved(data))
+    {
+        return Err(mfm_files::FileError::OutputInsideInput {
+            output: out.to_path_buf(),
+            input: data.to_path_buf(),
+        }
+        .into());
+    }
+    mfm_files::owned::refuse_writing_into(out)?;
     Ok(())
 }

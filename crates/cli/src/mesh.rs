@@ -87,7 +87,11 @@ impl ConvertArgs {
     /// Writes the mesh by the output's extension.
     pub fn run(self) -> Result<()> {
         let mesh = load_mesh(&self.mesh)?;
-        let undo = prepare_outputs(&[mesh_path(&self.mesh)], std::slice::from_ref(&self.out))?;
+        let undo = prepare_outputs(
+            &[mesh_path(&self.mesh)],
+            std::slice::from_ref(&self.out),
+            &[],
+        )?;
         mfm_meshio::write_mesh(&self.out, &mesh)?;
         undo.keep();
         println!(
@@ -139,7 +143,7 @@ impl RenderArgs {
             bail!("--size {}: expected 16..=8192 pixels", self.size);
         }
         let inputs = [mesh_path(&self.mesh), self.scalars.as_deref()];
-        let undo = prepare_outputs(&inputs, std::slice::from_ref(&self.out))?;
+        let undo = prepare_outputs(&inputs, std::slice::from_ref(&self.out), &[])?;
         let mesh = load_mesh(&self.mesh)?;
         let coordinate = |k: usize| mesh.positions().iter().map(|p| p[k]).collect();
         let values: Option<Vec<f64>> = match (self.scalar, &self.scalars) {
@@ -225,7 +229,7 @@ impl RemeshArgs {
             );
         }
         let inputs = [mesh_path(&self.mesh), self.space.as_deref()];
-        let undo = prepare_outputs(&inputs, std::slice::from_ref(&self.out))?;
+        let undo = prepare_outputs(&inputs, std::slice::from_ref(&self.out), &[])?;
         let mut mesh = load_mesh_checked(&self.mesh)?;
         let input = (mesh.num_vertices(), mesh.num_faces());
         for _ in 0..self.subdivide {

@@ -224,7 +224,7 @@ pub fn export(a: ExportArgs) -> Result<()> {
     .collect();
     let inputs: Vec<Option<&std::path::Path>> =
         run_files.iter().map(|p| Some(p.as_path())).collect();
-    let undo = crate::output::prepare_outputs(&inputs, std::slice::from_ref(&a.out))?;
+    let undo = crate::output::prepare_outputs(&inputs, std::slice::from_ref(&a.out), &[])?;
     let n = export_official(&a.run, &a.out)
         .with_context(|| format!("exporting the weights of {}", a.run.display()))?;
     undo.keep();

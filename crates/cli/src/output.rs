@@ -7,12 +7,21 @@ use std::path::{Path, PathBuf};
 
 pub use mfm_files::ensure_empty_dir as ensure_empty;
 
-/// Refuses outputs that are inputs, lie in an input folder, name one file
-/// twice or are not regular files, creates the outputs' folders, and
-/// returns the [`mfm_files::Undo`] of what the command creates.
-pub fn prepare_outputs(inputs: &[Option<&Path>], outputs: &[PathBuf]) -> Result<mfm_files::Undo> {
+/// Refuses outputs that are inputs, lie in an input folder or a folder
+/// another command owns, name one file twice or are not regular files,
+/// and `implicit` outputs (written without the user naming them) that
+/// exist; creates the outputs' folders, and returns the
+/// [`mfm_files::Undo`] of what the command creates.
+pub fn prepare_outputs(
+    inputs: &[Option<&Path>],
+    outputs: &[PathBuf],
+    implicit: &[PathBuf],
+) -> Result<mfm_files::Undo> {
     let guard = mfm_files::Outputs::new().inputs(inputs.iter().flatten());
-    Ok(guard.outputs(outputs).prepare()?)
+    let guard = implicit
+        .iter()
+        .fold(guard.outputs(outputs), |g, p| g.implicit(p));
+    Ok(guard.prepare()?)
 }
 
 /// Locks the folder `dir` a command writes (a run, dataset, sample or

@@ -159,12 +159,12 @@ impl NoiseArgs {
             );
         }
         let json = out.with_extension("json");
-        let mut outputs = vec![out.to_path_buf(), json.clone()];
+        let mut outputs = vec![out.to_path_buf()];
         outputs.extend(png.map(Path::to_path_buf));
         let mesh = load_mesh_checked(spec)?;
         let v = mesh.num_vertices();
         let bytes = mfm_files::npy::file_bytes(&[samples as u64, v as u64, channels as u64], 8);
-        let undo = prepare_outputs(&[mesh_path(spec)], &outputs)?;
+        let undo = prepare_outputs(&[mesh_path(spec)], &outputs, std::slice::from_ref(&json))?;
         mfm_files::space::ensure_space(out, bytes).with_context(|| {
             format!("{samples} samples x {v} vertices x {channels} channels of f64")
         })?;
@@ -264,13 +264,14 @@ impl SpectrumArgs {
             (args.samples as u128) * kept,
             8,
         )?;
-        let mut outputs = vec![args.out.to_path_buf()];
+        let outputs = vec![args.out.to_path_buf()];
+        let mut plots = Vec::new();
         if let Some(dir) = args.plots.as_deref() {
-            outputs.push(dir.join("variance.png"));
-            outputs.push(dir.join("coefficients.png"));
+            plots.push(dir.join("variance.png"));
+            plots.push(dir.join("coefficients.png"));
         }
         let inputs: Vec<Option<&Path>> = args.meshes.iter().map(|m| mesh_path(m)).collect();
-        let undo = prepare_outputs(&inputs, &outputs)?;
+        let undo = prepare_outputs(&inputs, &outputs, &plots)?;
         let request = SpectrumRequest {
             samples: args.samples,
             k: args.k,

@@ -7,6 +7,8 @@ use std::path::Path;
 use std::process::Command;
 
 mod common;
+#[cfg(feature = "network")]
+use common::TINY;
 use common::{err, ok, refused};
 
 fn tmp_files(dir: &Path) -> Vec<String> {
@@ -438,11 +440,6 @@ property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_he
     assert!(!d.join("s").exists() && !d.join("run2").exists());
     assert!(tmp_files(d).is_empty(), "{:?}", tmp_files(d));
 }
-
-/// The tiny run every training check below starts from.
-#[cfg(feature = "network")]
-const TINY: &str = "[model]\npreset = \"small\"\nwidth = 8\nblocks = 1\nvector_layers = 1\n\
-[train]\nsteps = 4\nbatch = 2\ncheckpoint_every = 2\nlog_every = 1\n[sample]\nsteps = 2\n";
 
 #[test]
 #[cfg(feature = "network")]

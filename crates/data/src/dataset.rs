@@ -60,7 +60,7 @@ pub const MESH_FILE: &str = "mesh.ply";
 /// Name of the signal array inside a dataset folder.
 pub const SIGNALS_FILE: &str = "signals.npy";
 /// Name of the manifest inside a dataset folder.
-pub const MANIFEST_FILE: &str = "manifest.json";
+pub const MANIFEST_FILE: &str = mfm_files::owned::MANIFEST;
 /// The manifest format version this code writes (and the newest it reads).
 pub const FORMAT_VERSION: u32 = 1;
 

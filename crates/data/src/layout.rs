@@ -58,15 +58,15 @@ use crate::pictures;
 use crate::signals::InMemorySignals;
 
 /// The training set's folder.
-pub const TRAIN: &str = "train";
+pub const TRAIN: &str = mfm_files::owned::SETS[0];
 /// The held-out set on the evaluation mesh.
-pub const REFERENCE: &str = "reference";
+pub const REFERENCE: &str = mfm_files::owned::SETS[1];
 /// The held-out set on the training mesh (deformation experiments).
-pub const HOLDOUT: &str = "holdout";
+pub const HOLDOUT: &str = mfm_files::owned::SETS[2];
 /// The test mesh of a GMM experiment written without a reference set.
 pub const TEST_MESH: &str = "test_mesh.ply";
 /// The deformation space of a deformation experiment.
-pub const SPACE: &str = "space.json";
+pub const SPACE: &str = mfm_files::owned::SPACE;
 /// The preview picture of the training signals.
 pub const PREVIEW: &str = "preview.png";
 /// The mesh files of a deformation experiment, by role.
@@ -355,7 +355,7 @@ pub fn read_space(path: &Path) -> Result<DeformSpace> {
 }
 
 /// The pair space of a pairs experiment ([`PairsExperiment`]).
-pub const PAIR_SPACE: &str = "pair_space.json";
+pub const PAIR_SPACE: &str = mfm_files::owned::PAIR_SPACE;
 
 /// A pairs experiment (`mfm dataset pairs`): posed shapes of a template for
 /// the arbitrary-source model ([`crate::pairs`]).

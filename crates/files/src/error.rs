@@ -37,6 +37,34 @@ pub enum FileError {
         /// The input as given.
         input: PathBuf,
     },
+    /// An output would go into a folder another mfm command owns (a
+    /// dataset, an experiment, a training run; [`crate::owned`]).
+    #[error(
+        "{} would be written into {}, {kind} (it holds {marker}); mfm never writes into a \
+         dataset, experiment or run folder but its own: choose an output outside it (nothing \
+         was written)",
+        path.display(), folder.display()
+    )]
+    InsideOwnedFolder {
+        /// The output as given.
+        path: PathBuf,
+        /// The owned folder.
+        folder: PathBuf,
+        /// What the folder is ("a dataset folder").
+        kind: &'static str,
+        /// The entry that shows it.
+        marker: String,
+    },
+    /// A file a command writes without the user naming it exists.
+    #[error(
+        "{} exists, and this command would replace it without being asked (a summary or plot \
+         written beside its output); move it, or choose another output (nothing was written)",
+        path.display()
+    )]
+    ImplicitExists {
+        /// The file.
+        path: PathBuf,
+    },
     /// An output lies inside an input folder.
     #[error(
         "{} is inside the input folder {}; choose an output outside it (nothing was written)",

@@ -33,6 +33,7 @@ use std::path::{Component, Path, PathBuf};
 pub struct Outputs {
     inputs: Vec<PathBuf>,
     outputs: Vec<PathBuf>,
+    implicit: Vec<PathBuf>,
 }
 
 impl Outputs {
@@ -55,6 +56,26 @@ impl Outputs {
         self
     }
 
+    /// Adds a file the command writes without the user naming it (a
+    /// summary beside `--out`, a plot of a fixed name): it is an output,
+    /// and it must not exist, so that it never replaces a file the user
+    /// did not ask to replace.
+    ///
+    /// ```
+    /// let dir = tempfile::tempdir().unwrap();
+    /// std::fs::write(dir.path().join("x.json"), "mine").unwrap();
+    /// let err = mfm_files::Outputs::new()
+    ///     .output(dir.path().join("x.npy"))
+    ///     .implicit(dir.path().join("x.json"))
+    ///     .check()
+    ///     .unwrap_err();
+    /// assert!(err.to_string().contains("x.json exists"));
+    /// ```
+    pub fn implicit(mut self, path: impl AsRef<Path>) -> Self {
+        self.implicit.push(path.as_ref().to_path_buf());
+        self.output(path)
+    }
+
     /// Adds every path of `paths` as an input ([`Outputs::input`]); an
     /// `Option` adds nothing when it is `None`.
     pub fn inputs<P: AsRef<Path>>(self, paths: impl IntoIterator<Item = P>) -> Self {
@@ -66,9 +87,13 @@ impl Outputs {
         paths.into_iter().fold(self, Self::output)
     }
 
-    /// Checks every rule; the first broken one is the error.
+    /// Checks every rule; the first broken one is the error. Besides the
+    /// rules of the [module docs](self), no output goes into a folder
+    /// another command owns ([`crate::owned::refuse_writing_into`]) and no
+    /// implicit output ([`Outputs::implicit`]) exists.
     ///
     /// # Errors
+    /// [`FileError::InsideOwnedFolder`], [`FileError::ImplicitExists`],
     /// [`FileError::NotRegular`], [`FileError::OutputIsInput`],
     /// [`FileError::OutputInsideInput`] or [`FileError::SameOutput`], each
     /// naming the paths as given.
@@ -82,6 +107,7 @@ impl Outputs {
         let mut seen: Vec<(&PathBuf, Identity)> = Vec::new();
         for out in &self.outputs {
             resolve_target(out)?;
+            crate::owned::refuse_writing_into(out)?;
             let id = Identity::of(out);
             for (input, input_id) in &inputs {
                 if id.same_file(input_id) {
@@ -104,6 +130,11 @@ impl Outputs {
                 });
             }
             seen.push((out, id));
+        }
+        if let Some(existing) = self.implicit.iter().find(|p| p.symlink_metadata().is_ok()) {
+            return Err(FileError::ImplicitExists {
+                path: existing.clone(),
+            });
         }
         Ok(())
     }

@@ -34,6 +34,7 @@ pub mod interrupt;
 pub mod lock;
 pub mod matrix_market;
 pub mod npy;
+pub mod owned;
 pub mod space;
 pub mod text;
 pub mod undo;

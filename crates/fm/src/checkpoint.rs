@@ -42,9 +42,9 @@ use serde::{Deserialize, Serialize};
 use crate::error::{FmError, Result};
 
 /// The run configuration file (in the run folder and in each checkpoint).
-pub const CONFIG_FILE: &str = "config.toml";
+pub const CONFIG_FILE: &str = mfm_files::owned::RUN_CONFIG;
 /// The [`FlowSpec`] file (in the run folder and in each checkpoint).
-pub const FLOW_FILE: &str = "flow.json";
+pub const FLOW_FILE: &str = mfm_files::owned::RUN_FLOW;
 /// Network weights (safetensors).
 pub const WEIGHTS_FILE: &str = "model.safetensors";
 /// Network configuration (JSON), written next to the weights.
@@ -59,9 +59,9 @@ pub const FINAL_RECORD_FILE: &str = "model.state.json";
 /// [`CheckpointState`] (JSON).
 pub const STATE_FILE: &str = "state.json";
 /// The training log (CSV) in the run folder.
-pub const LOG_FILE: &str = "train_log.csv";
+pub const LOG_FILE: &str = mfm_files::owned::RUN_LOG;
 /// The folder of checkpoints in the run folder.
-pub const CHECKPOINTS_DIR: &str = "checkpoints";
+pub const CHECKPOINTS_DIR: &str = mfm_files::owned::RUN_CHECKPOINTS;
 /// Version of [`CheckpointState`]'s format.
 pub const STATE_FORMAT: u32 = 1;
 

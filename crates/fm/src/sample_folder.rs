@@ -13,9 +13,7 @@ use std::path::{Path, PathBuf};
 
 use mfm_geometry::TriMesh;
 
-use crate::checkpoint::{
-    CHECKPOINTS_DIR, CONFIG_FILE, FLOW_FILE, LOG_FILE, NET_CONFIG_FILE, WEIGHTS_FILE,
-};
+use crate::checkpoint::{CHECKPOINTS_DIR, CONFIG_FILE, FLOW_FILE, NET_CONFIG_FILE, WEIGHTS_FILE};
 use crate::config::RunConfig;
 use crate::error::{FmError, Result};
 use crate::sample::{
@@ -24,11 +22,20 @@ use crate::sample::{
 };
 
 /// The integration options a run folder asks for: its `config.toml`'s
-/// `[sample]` table, or the defaults when the run has none.
-pub fn run_sample_options(run: &Path) -> SampleOptions {
-    RunConfig::from_toml_file(run.join(CONFIG_FILE))
-        .map(|c| SampleOptions::from(&c.sample))
-        .unwrap_or_default()
+/// `[sample]` table; `None` when the run has no `config.toml` (the caller
+/// says which defaults it assumes).
+///
+/// # Errors
+/// [`FmError::Config`] (or `Files`) naming the file when it exists but does
+/// not read as a run configuration: a damaged run is not sampled with
+/// options it never asked for.
+pub fn run_sample_options(run: &Path) -> Result<Option<SampleOptions>> {
+    let path = run.join(CONFIG_FILE);
+    if !path.exists() {
+        return Ok(None);
+    }
+    let config = RunConfig::from_toml_file(&path)?;
+    Ok(Some(SampleOptions::from(&config.sample)))
 }
 
 /// Refuses an output folder that is not a folder, or one with anything in
@@ -72,30 +79,16 @@ experiment or run folder: choose another --out",
 }
 
 /// What kind of mfm folder `dir` is, when it is one no other command may
-/// write into, and the file that shows it: a dataset (`manifest.json`), an
-/// experiment (a `train/`, `reference/` or `holdout/` dataset, a
-/// deformation or pair space), or a training run of any mode (its config,
-/// flow description, log or checkpoints).
+/// write into, and the file that shows it: a folder
+/// [`mfm_files::owned::owned_folder_kind`] names, or one holding a run's
+/// [`CONFIG_FILE`] (for `--force`, which clears a folder: a configuration
+/// there may be a run's that has not written anything else yet).
 pub fn protected_folder_kind(dir: &Path) -> Option<(&'static str, String)> {
-    use mfm_data::dataset::MANIFEST_FILE;
-    use mfm_data::layout::{HOLDOUT, PAIR_SPACE, REFERENCE, SPACE, TRAIN};
-    let has = |rel: &str| dir.join(rel).exists().then(|| rel.to_owned());
-    let dataset = has(MANIFEST_FILE).map(|m| ("a dataset folder", m));
-    let experiment = || {
-        [TRAIN, REFERENCE, HOLDOUT]
-            .iter()
-            .find_map(|set| has(&format!("{set}/{MANIFEST_FILE}")))
-            .or_else(|| has(SPACE))
-            .or_else(|| has(PAIR_SPACE))
-            .map(|m| ("an experiment folder", m))
-    };
-    let run = || {
-        [CONFIG_FILE, FLOW_FILE, LOG_FILE, CHECKPOINTS_DIR]
-            .iter()
-            .find_map(|f| has(f))
-            .map(|m| ("a training run folder", m))
-    };
-    dataset.or_else(experiment).or_else(run)
+    mfm_files::owned::owned_folder_kind(dir).or_else(|| {
+        dir.join(CONFIG_FILE)
+            .exists()
+            .then(|| ("a training run folder", CONFIG_FILE.to_owned()))
+    })
 }
 
 /// What [`SampleFolder::write`] draws and where.
@@ -105,6 +98,9 @@ pub struct SampleFolder<'a> {
     pub run: &'a Path,
     /// The mesh's file, `None` for a built-in mesh (an input too).
     pub mesh_file: Option<&'a Path>,
+    /// The file of the starting noise (`mfm sample --x0`), an input too:
+    /// never replaced by the samples.
+    pub start_file: Option<&'a Path>,
     /// The output folder.
     pub out: &'a Path,
     /// Samples `0..count` of the seed's sequence.
@@ -154,6 +150,7 @@ impl SampleFolder<'_> {
         let undo = mfm_files::Outputs::new()
             .inputs(run_files.map(|f| self.run.join(f)))
             .inputs(self.mesh_file)
+            .inputs(self.start_file)
             .outputs(&outputs)
             .prepare()?;
         let shape = [n as u64, v as u64, c as u64];

@@ -41,3 +41,8 @@ pub fn ok(dir: &Path, args: &[&str]) -> Output {
     assert!(o.status.success(), "{args:?}: {}", err(&o));
     o
 }
+
+/// The tiny run configuration the training checks start from (4 steps of
+/// a width-8 network, checkpoints every 2).
+pub const TINY: &str = "[model]\npreset = \"small\"\nwidth = 8\nblocks = 1\nvector_layers = 1\n\
+[train]\nsteps = 4\nbatch = 2\ncheckpoint_every = 2\nlog_every = 1\n[sample]\nsteps = 2\n";

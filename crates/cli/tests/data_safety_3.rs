@@ -1,0 +1,305 @@
+//! Data safety, third round (issue 39): every writer keeps out of the
+//! folders other commands own, implicit companions never replace a file,
+//! sizes and values that make no sense are refused up front, and what a
+//! killed command left is cleared by the next one. Each check drives the
+//! real binary.
+#![allow(clippy::unwrap_used)]
+
+use std::fs;
+use std::path::Path;
+
+mod common;
+use common::{ok, refused};
+
+/// A small GMM experiment `DIR/data` (train and reference sets) and a
+/// folder `DIR/run` that holds what marks a training run.
+fn owned_folders(d: &Path) {
+    ok(
+        d,
+        &[
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:blob:2",
+            "--n",
+            "3",
+            "--reference",
+            "2",
+            "--sigma",
+            "0.1",
+            "--min-separation",
+            "2",
+            "--out",
+            "data",
+        ],
+    );
+    fs::create_dir_all(d.join("run/checkpoints/step-000000002")).unwrap();
+    fs::write(d.join("run/flow.json"), "{}").unwrap();
+    fs::write(d.join("run/model.json"), "{\"the\": \"run's\"}").unwrap();
+}
+
+#[test]
+fn writers_never_write_into_datasets_experiments_or_runs() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    owned_folders(d);
+    let kept = |rel: &str| fs::read(d.join(rel)).unwrap();
+    let before: Vec<(&str, Vec<u8>)> = [
+        "data/train/signals.npy",
+        "data/train/mesh.ply",
+        "data/reference/mesh.ply",
+        "run/flow.json",
+        "run/model.json",
+    ]
+    .into_iter()
+    .map(|f| (f, kept(f)))
+    .collect();
+    let ico = "builtin:icosphere:1";
+    for (args, folder) in [
+        (
+            vec!["noise", ico, "--out", "data/train/signals.npy"],
+            "a dataset folder",
+        ),
+        (
+            vec!["convert", ico, "data/reference/mesh.ply"],
+            "a dataset folder",
+        ),
+        (
+            vec![
+                "remesh",
+                ico,
+                "--subdivide",
+                "1",
+                "--out",
+                "data/train/mesh.ply",
+            ],
+            "a dataset folder",
+        ),
+        (
+            vec!["remesh", ico, "--subdivide", "1", "--out", "data/fine.ply"],
+            "an experiment folder",
+        ),
+        (
+            vec![
+                "spectrum",
+                ico,
+                "--samples",
+                "4",
+                "--k",
+                "4",
+                "--out",
+                "run/flow.json",
+            ],
+            "a training run folder",
+        ),
+        // the implicit summary would have replaced the run's model.json
+        (
+            vec!["noise", ico, "--out", "run/model.npy"],
+            "a training run folder",
+        ),
+        (
+            vec!["operators", ico, "--out", "data/train"],
+            "a dataset folder",
+        ),
+        (
+            vec!["eigs", ico, "--k", "3", "--out", "run/checkpoints/eigs"],
+            "checkpoints folder",
+        ),
+        (
+            vec![
+                "spectrum",
+                ico,
+                "--samples",
+                "4",
+                "--k",
+                "4",
+                "--out",
+                "s.json",
+                "--plots",
+                "data/train",
+            ],
+            "a dataset folder",
+        ),
+    ] {
+        let e = refused(d, &args, folder);
+        assert!(e.contains("never writes into"), "{args:?}: {e}");
+    }
+    for (f, bytes) in &before {
+        assert_eq!(&kept(f), bytes, "{f} was changed");
+    }
+    assert!(!d.join("run/model.npy").exists() && !d.join("data/fine.ply").exists());
+    assert!(!d.join("run/checkpoints/eigs").exists());
+    assert!(!d.join("data/train/L.mtx").exists());
+    // a subfolder of a run (samples kept beside it) is the user's
+    ok(d, &["noise", ico, "--out", "run/samples/noise.npy"]);
+}
+
+#[test]
+fn implicit_companions_never_replace_a_file() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    let ico = "builtin:icosphere:1";
+    fs::write(d.join("n.json"), "mine").unwrap();
+    let e = refused(d, &["noise", ico, "--out", "n.npy"], "n.json exists");
+    assert!(e.contains("without being asked"), "{e}");
+    assert_eq!(fs::read_to_string(d.join("n.json")).unwrap(), "mine");
+    assert!(!d.join("n.npy").exists());
+    fs::create_dir(d.join("plots")).unwrap();
+    fs::write(d.join("plots/variance.png"), "mine").unwrap();
+    refused(
+        d,
+        &[
+            "spectrum",
+            ico,
+            "--samples",
+            "4",
+            "--k",
+            "4",
+            "--out",
+            "s.json",
+            "--plots",
+            "plots",
+        ],
+        "variance.png exists",
+    );
+    assert_eq!(
+        fs::read_to_string(d.join("plots/variance.png")).unwrap(),
+        "mine"
+    );
+    assert!(!d.join("s.json").exists());
+    // named outputs are still replaced as asked
+    ok(d, &["noise", ico, "--out", "m.npy"]);
+    fs::remove_file(d.join("m.json")).unwrap();
+    ok(d, &["noise", ico, "--out", "m.npy"]);
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn a_run_is_never_written_inside_the_dataset_it_reads() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    owned_folders(d);
+    let e = refused(
+        d,
+        &[
+            "train",
+            "--preset",
+            "cpu",
+            "--dataset",
+            "data/train",
+            "--out",
+            "data/train/run",
+        ],
+        "inside the input folder",
+    );
+    assert!(e.contains("data/train"), "{e}");
+    assert!(!d.join("data/train/run").exists());
+    refused(
+        d,
+        &[
+            "train",
+            "--preset",
+            "cpu",
+            "--dataset",
+            "data/train",
+            "--out",
+            "run/checkpoints/run2",
+        ],
+        "checkpoints folder",
+    );
+    assert!(!d.join("run/checkpoints/run2").exists());
+}
+
+/// `owned_folders` and a real run `DIR/tiny` trained on `DIR/data/train`,
+/// sampled into `DIR/out`.
+#[cfg(feature = "network")]
+fn tiny_run(d: &Path) {
+    owned_folders(d);
+    fs::write(d.join("tiny.toml"), common::TINY).unwrap();
+    ok(
+        d,
+        &[
+            "train",
+            "--config",
+            "tiny.toml",
+            "--dataset",
+            "data/train",
+            "--out",
+            "tiny",
+            "--quiet",
+        ],
+    );
+    ok(
+        d,
+        &[
+            "sample",
+            "--run",
+            "tiny",
+            "--mesh",
+            "data/train/mesh.ply",
+            "--n",
+            "2",
+            "--out",
+            "out",
+        ],
+    );
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn sampling_keeps_its_starting_noise_and_reads_its_run_configuration() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    tiny_run(d);
+    let samples = fs::read(d.join("out/samples.npy")).unwrap();
+    let sample = |extra: &[&str]| -> Vec<String> {
+        [
+            "sample",
+            "--run",
+            "tiny",
+            "--mesh",
+            "data/train/mesh.ply",
+            "--out",
+            "out2",
+        ]
+        .iter()
+        .chain(extra)
+        .map(|s| s.to_string())
+        .collect()
+    };
+    // --x0 is an input: --force never replaces it with the samples
+    let e = refused(
+        d,
+        &[
+            "sample",
+            "--run",
+            "tiny",
+            "--mesh",
+            "data/train/mesh.ply",
+            "--x0",
+            "out/samples.npy",
+            "--out",
+            "out",
+            "--force",
+        ],
+        "is also an input",
+    );
+    assert!(e.contains("samples.npy"), "{e}");
+    assert_eq!(fs::read(d.join("out/samples.npy")).unwrap(), samples);
+    // a damaged configuration is refused by name, not replaced by defaults
+    let config = fs::read_to_string(d.join("tiny/config.toml")).unwrap();
+    fs::write(d.join("tiny/config.toml"), "[sample\nsteps = ").unwrap();
+    let args = sample(&[]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    refused(d, &args, "config.toml");
+    assert!(!d.join("out2").exists());
+    // a missing one is said, with the defaults assumed
+    fs::remove_file(d.join("tiny/config.toml")).unwrap();
+    let o = ok(d, &args);
+    let e = common::err(&o);
+    assert!(
+        e.contains("has no config.toml") && e.contains("20 midpoint steps"),
+        "{e}"
+    );
+    fs::write(d.join("tiny/config.toml"), config).unwrap();
+}
