@@ -235,10 +235,14 @@ pub struct SpectrumArgs {
     /// Folder for PNG plots (variance vs eigenvalue, coefficient histograms).
     #[arg(long)]
     plots: Option<PathBuf>,
-    /// Frequencies whose coefficient histograms are plotted.
-    #[arg(long, value_delimiter = ',', default_value = "2,10,50")]
-    coefficients: Vec<usize>,
+    /// Frequencies whose coefficient histograms are plotted, each below
+    /// --k (default: those of 2, 10, 50 below --k).
+    #[arg(long, value_delimiter = ',')]
+    coefficients: Option<Vec<usize>>,
 }
+
+/// The frequencies plotted without `--coefficients` (those below `--k`).
+const DEFAULT_COEFFICIENTS: [usize; 3] = [2, 10, 50];
 
 impl SpectrumArgs {
     /// Per-frequency statistics of noise on one or several meshes
@@ -252,13 +256,30 @@ impl SpectrumArgs {
         if args.samples < 2 || args.k == 0 {
             bail!("--samples must be at least 2 and --k at least 1");
         }
+        let coefficients: Vec<usize> = match &args.coefficients {
+            Some(given) => {
+                if let Some(i) = given.iter().find(|&&i| i >= args.k) {
+                    bail!(
+                        "--coefficients {i}: a frequency index must be below --k {} (the \
+                         frequencies measured are 0..{})",
+                        args.k,
+                        args.k
+                    );
+                }
+                given.clone()
+            }
+            None => DEFAULT_COEFFICIENTS
+                .into_iter()
+                .filter(|&i| i < args.k)
+                .collect(),
+        };
         // the coefficients of the plotted frequencies are kept for every sample
-        let kept = (args.coefficients.len() * args.meshes.len()) as u128;
+        let kept = (coefficients.len() * args.meshes.len()) as u128;
         mfm_files::space::ensure_memory(
             &format!(
                 "--samples {} x {} kept coefficients (--coefficients) x {} mesh(es) of f64",
                 args.samples,
-                args.coefficients.len(),
+                coefficients.len(),
                 args.meshes.len()
             ),
             (args.samples as u128) * kept,
@@ -276,11 +297,10 @@ impl SpectrumArgs {
             samples: args.samples,
             k: args.k,
             seed: args.seed,
-            keep: args.coefficients.to_vec(),
+            keep: coefficients.clone(),
         };
         let (mut meshes, mut series) = (Vec::new(), Vec::new());
-        let mut histograms: Vec<Vec<(String, Vec<f64>)>> =
-            vec![Vec::new(); args.coefficients.len()];
+        let mut histograms: Vec<Vec<(String, Vec<f64>)>> = vec![Vec::new(); coefficients.len()];
         for spec in &args.meshes {
             let mesh = load_mesh_checked(spec)?;
             let v = mesh.num_vertices();
@@ -299,9 +319,14 @@ impl SpectrumArgs {
             .with_context(|| format!("{spec}: spectrum"))?;
             bar.finish_and_clear();
             println!("{}", m.summary());
-            for (slot, i) in histograms.iter_mut().zip(&args.coefficients) {
-                if let Some((_, c)) = kept.iter().find(|(j, _)| j == i) {
-                    slot.push((spec.clone(), c.clone()));
+            for (slot, i) in histograms.iter_mut().zip(&coefficients) {
+                match kept.iter().find(|(j, _)| j == i) {
+                    Some((_, c)) => slot.push((spec.clone(), c.clone())),
+                    None => eprintln!(
+                        "warning: {spec}: c_{i} is not plotted for this mesh: it has only {} \
+                         frequencies",
+                        m.report.eigenvalues.len()
+                    ),
                 }
             }
             let r = &m.report;
@@ -323,8 +348,7 @@ impl SpectrumArgs {
             let variance = dir.join("variance.png");
             plots::variance_plot(&variance, &format!("Var(c_i), {} noise", kind), &series)?;
             println!("wrote {}", variance.display());
-            let panels: Vec<HistogramPanel> = args
-                .coefficients
+            let panels: Vec<HistogramPanel> = coefficients
                 .iter()
                 .zip(histograms)
                 .filter(|(_, s)| !s.is_empty())

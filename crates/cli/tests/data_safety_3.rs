@@ -303,3 +303,122 @@ fn sampling_keeps_its_starting_noise_and_reads_its_run_configuration() {
     );
     fs::write(d.join("tiny/config.toml"), config).unwrap();
 }
+
+#[test]
+fn sizes_and_values_that_make_no_sense_are_refused_up_front() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    let gmm = |extra: &[&str]| -> Vec<String> {
+        [
+            "dataset",
+            "gmm",
+            "--mesh",
+            "builtin:icosphere:1",
+            "--n",
+            "2",
+        ]
+        .iter()
+        .chain(extra)
+        .map(|s| s.to_string())
+        .collect()
+    };
+    let check = |args: Vec<String>, needle: &str| {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let e = refused(d, &args, needle);
+        assert!(!e.contains("panicked") && !e.contains("NaN"), "{e}");
+    };
+    // a bump count beyond the mesh: no overflow, no 32 GB allocation
+    for bumps in ["18446744073709551615", "4000000000"] {
+        check(
+            gmm(&["--bumps", bumps, "--out", "g"]),
+            "at most the mesh's 42 vertices",
+        );
+    }
+    // a bump width that underflows
+    check(gmm(&["--sigma", "1e-300", "--out", "g"]), "gmm.sigma");
+    assert!(!d.join("g").exists() && !d.join(".g.mfm-lock").exists());
+    // a handle count that wraps around
+    check(
+        vec![
+            "dataset".into(),
+            "deform".into(),
+            "--mesh".into(),
+            "builtin:capsule".into(),
+            "--handles".into(),
+            "18446744073709551615".into(),
+            "--out".into(),
+            "dd".into(),
+        ],
+        "cannot place 18446744073709551615 handles",
+    );
+    // a translation that tears the shape apart
+    check(
+        vec![
+            "dataset".into(),
+            "deform".into(),
+            "--mesh".into(),
+            "builtin:capsule".into(),
+            "--max-shift".into(),
+            "1e20".into(),
+            "--out".into(),
+            "dd".into(),
+        ],
+        "max_shift",
+    );
+    assert!(!d.join("dd").exists());
+    // screening so strong the noise vanishes
+    check(
+        vec![
+            "noise".into(),
+            "builtin:icosphere:1".into(),
+            "--kind".into(),
+            "matern".into(),
+            "--tau".into(),
+            "1e300".into(),
+            "--out".into(),
+            "n.npy".into(),
+        ],
+        "[0, 1e10]",
+    );
+    // built-in meshes beyond their cap are refused before they are built
+    check(
+        vec!["info".into(), "builtin:grid:100000".into()],
+        "at most 1024",
+    );
+    // a plotted frequency that is not measured
+    check(
+        vec![
+            "spectrum".into(),
+            "builtin:icosphere:1".into(),
+            "--samples".into(),
+            "4".into(),
+            "--k".into(),
+            "8".into(),
+            "--out".into(),
+            "s.json".into(),
+            "--plots".into(),
+            "p".into(),
+            "--coefficients".into(),
+            "2,999".into(),
+        ],
+        "--coefficients 999",
+    );
+    assert!(!d.join("s.json").exists());
+    // a folder's path that holds a file
+    fs::write(d.join("taken"), "mine").unwrap();
+    check(gmm(&["--out", "taken"]), "is not a folder");
+    assert_eq!(fs::read_to_string(d.join("taken")).unwrap(), "mine");
+}
+
+#[test]
+fn obj_index_errors_count_as_the_file_does() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    fs::write(
+        d.join("bad.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 5\n",
+    )
+    .unwrap();
+    let e = refused(d, &["info", "bad.obj"], "vertex index 5");
+    assert!(e.contains("line 6") && e.contains("1 to 4"), "{e}");
+}

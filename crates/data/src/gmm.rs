@@ -131,12 +131,18 @@ impl Default for GmmConfig {
     }
 }
 
+/// The narrowest bump [`GmmConfig::sigma`] may ask for (relative to the
+/// square root of the area): narrower ones underflow to a single vertex
+/// (and `0 / 0` at their centre).
+pub const MIN_SIGMA: f64 = 1e-6;
+
 impl GmmConfig {
     /// Checks every field.
     ///
     /// # Errors
     /// [`DataError::Config`] naming the field: `bumps` or `max_attempts` zero,
-    /// `sigma` or `heat_time_factor` not finite and positive,
+    /// `sigma` not finite or below [`MIN_SIGMA`], `heat_time_factor` not
+    /// finite and positive,
     /// `min_separation` negative or not finite.
     pub fn validate(&self) -> Result<()> {
         let bad = |field: &str, requirement: &str, found: String| {
@@ -150,8 +156,15 @@ impl GmmConfig {
         if self.max_attempts == 0 {
             return bad("max_attempts", "at least 1", "0".into());
         }
-        if !(self.sigma.is_finite() && self.sigma > 0.0) {
-            return bad("sigma", "finite and > 0", self.sigma.to_string());
+        if !(self.sigma.is_finite() && self.sigma >= MIN_SIGMA) {
+            return bad(
+                "sigma",
+                &format!(
+                    "finite and at least {MIN_SIGMA} (relative to the square root of the area; \
+                     0.02 to 0.3 make visible bumps)"
+                ),
+                self.sigma.to_string(),
+            );
         }
         if !(self.min_separation.is_finite() && self.min_separation >= 0.0) {
             return bad(
@@ -250,9 +263,18 @@ impl GmmGenerator {
     /// # Errors
     /// [`GmmConfig::validate`]'s errors; [`DataError::Geodesic`] from
     /// [`HeatGeodesics::with_time_factor`];
-    /// [`DataError::Config`] if the mesh has no area.
+    /// [`DataError::Config`] if the mesh has no area, or fewer vertices
+    /// than `config.bumps` (each bump is centred at its own vertex).
     pub fn new(mesh: &TriMesh, config: &GmmConfig) -> Result<Self> {
         config.validate()?;
+        if config.bumps > mesh.num_vertices() {
+            return Err(DataError::Config(format!(
+                "gmm.bumps must be at most the mesh's {} vertices (each bump is centred at its own \
+                 vertex), found {}",
+                mesh.num_vertices(),
+                config.bumps
+            )));
+        }
         let mass = lumped_mass(mesh);
         let mut total = 0.0;
         let cumulative_mass: Vec<f64> = mass

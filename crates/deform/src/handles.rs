@@ -159,9 +159,15 @@ impl HandleSet {
         }
         let radius = radius_fraction * mesh.bounding_box_diagonal();
         let placement_error = |reason: String| DeformError::HandlePlacement {
-            requested: count + 1,
+            requested: count.saturating_add(1),
             reason,
         };
+        if count >= mesh.num_vertices() {
+            return Err(placement_error(format!(
+                "the mesh has {} vertices, and each handle (the anchor too) needs its own",
+                mesh.num_vertices()
+            )));
+        }
         if !(radius.is_finite() && radius > 0.0) {
             return Err(placement_error(format!(
                 "the mesh has a zero bounding box, so the radius would be {radius}"

@@ -96,7 +96,8 @@ impl DeformSpace {
         }
     }
 
-    /// Checks the ranges: `max_angle`, `max_shift` finite and `>= 0`,
+    /// Checks the ranges: `max_angle` finite and `>= 0`, `max_shift` in
+    /// `[0, 1]`,
     /// `diagonal` finite and `> 0`, `up <= 2`.
     ///
     /// # Errors
@@ -116,10 +117,11 @@ impl DeformSpace {
                 self.max_angle.to_string(),
             );
         }
-        if !(self.max_shift.is_finite() && self.max_shift >= 0.0) {
+        if !(self.max_shift.is_finite() && (0.0..=1.0).contains(&self.max_shift)) {
             return bad(
                 "max_shift",
-                "a finite fraction >= 0",
+                "a fraction of the bounding-box diagonal in [0, 1] (0.05 to 0.2 pose a shape; a \
+                 handle moved farther than the shape's size tears it apart)",
                 self.max_shift.to_string(),
             );
         }

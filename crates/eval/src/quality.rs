@@ -426,7 +426,7 @@ impl GmmQualityReport {
         format!(
             "bump fit: residual median {:.3} [{:.3}, {:.3}] (data {:.3}), peak median {:.2} (data {:.2}), \
              bumps above half height {:.2} per sample (data {:.2}), {:.0}% data-like (residual <= {:.2}), \
-             diversity {:.2}",
+             diversity {}",
             g.residual.median,
             g.residual.q1,
             g.residual.q3,
@@ -437,7 +437,11 @@ impl GmmQualityReport {
             r.bumps_above_half,
             100.0 * self.within_twice_floor,
             (2.0 * self.floor).max(DATA_LIKE_MIN),
-            self.diversity
+            if self.diversity.is_nan() {
+                "not measured (it needs at least 2 samples and 2 reference signals)".to_owned()
+            } else {
+                format!("{:.2}", self.diversity)
+            }
         )
     }
 }

@@ -126,6 +126,11 @@ fn flat_noise_and_single_mode_sets_are_far_from_the_floor() {
     let single = InMemorySignals::new(one.clone(), 1, v, 1).unwrap();
     let r = report(&s, &single);
     assert!(r.generated.residual.median < 0.1 && r.diversity.is_nan());
+    let line = r.summary();
+    assert!(
+        !line.contains("NaN") && line.contains("needs at least 2 samples"),
+        "{line}"
+    );
     assert!(diversity(&s.mass, &single, &s.reference).is_err());
 }
 

@@ -55,6 +55,16 @@ pub enum FileError {
         /// The entry that shows it.
         marker: String,
     },
+    /// An output folder's path holds a file (or anything but a folder).
+    #[error(
+        "{} exists and is not a folder; this command writes a folder of files there: choose \
+         another path (nothing was written)",
+        path.display()
+    )]
+    NotAFolder {
+        /// The path as given.
+        path: PathBuf,
+    },
     /// A file a command writes without the user naming it exists.
     #[error(
         "{} exists, and this command would replace it without being asked (a summary or plot \
@@ -89,14 +99,18 @@ pub enum FileError {
     },
     /// The output needs more space than its file system has free.
     #[error(
-        "{}: the output needs {} but only {} are free there (nothing was written)",
-        path.display(), crate::space::human_bytes(*needed), crate::space::human_bytes(*available)
+        "{}: disk full: the output needs {}, and mfm leaves {} free beside it (1% of the free \
+         space, at least 16 MiB); only {} are free there (nothing was written)",
+        path.display(), crate::space::human_bytes(*needed), crate::space::human_bytes(*margin),
+        crate::space::human_bytes(*available)
     )]
     NoSpace {
         /// The output.
         path: PathBuf,
         /// Bytes the output needs.
         needed: u64,
+        /// Bytes left free beside it ([`crate::space::margin`]).
+        margin: u64,
         /// Bytes free on its file system.
         available: u64,
     },

@@ -167,8 +167,14 @@ impl Outputs {
 /// non-empty.
 ///
 /// # Errors
-/// [`FileError::NotEmpty`].
+/// [`FileError::NotEmpty`]; [`FileError::NotAFolder`] for a file (or
+/// anything but a folder) at `dir`.
 pub fn ensure_empty_dir(dir: &Path) -> Result<(), FileError> {
+    if dir.symlink_metadata().is_ok() && !dir.is_dir() {
+        return Err(FileError::NotAFolder {
+            path: dir.to_path_buf(),
+        });
+    }
     crate::interrupt::remove_stale_temporaries(dir, None);
     if let Ok(mut entries) = fs::read_dir(dir)
         && entries.next().is_some()

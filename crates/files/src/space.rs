@@ -46,18 +46,26 @@ fn statvfs_available(_: &Path) -> std::io::Result<Option<u64>> {
     Ok(None)
 }
 
+/// The bytes every writer leaves free beside its output on a file system
+/// with `available` bytes free: 1% of them, at least 16 MiB (so that the
+/// system and other programs can still write).
+pub fn margin(available: u64) -> u64 {
+    (available / 100).max(16 << 20)
+}
+
 /// Refuses an output of `needed` bytes at `path` when its file system has
-/// less free (with 1% and 16 MiB to spare).
+/// less free than `needed` plus [`margin`]: the one rule of every writer.
 ///
 /// # Errors
-/// [`FileError::NoSpace`] with both numbers.
+/// [`FileError::NoSpace`] with the three numbers.
 pub fn ensure_space(path: &Path, needed: u64) -> Result<(), FileError> {
     if let Some(available) = available_bytes(path)? {
-        let margin = (available / 100).max(16 << 20);
+        let margin = margin(available);
         if needed.saturating_add(margin) > available {
             return Err(FileError::NoSpace {
                 path: path.to_path_buf(),
                 needed,
+                margin,
                 available,
             });
         }

@@ -553,17 +553,26 @@ pub fn refuse_restart_over_final_model(run_dir: &Path) -> Result<()> {
 /// payload files into a fresh temporary folder, then the checksums of every
 /// file there go into `state.files`, `state.json` is written, and the folder
 /// is renamed to [`checkpoint_dir`] (replacing an older checkpoint of the
-/// same step). Returns the final folder.
+/// same step). Returns the final folder. The disk must first have room for
+/// a checkpoint as large as the last one ([`mfm_files::space::ensure_space`]);
+/// on any failure the temporary folder is removed.
 ///
 /// # Errors
-/// Those of `fill`; [`FmError::Files`] (`Io`) naming the file or folder.
+/// Those of `fill`; [`FmError::Files`] (`Io`) naming the file or folder;
+/// (`NoSpace`) when the disk is full, before or while writing.
 pub fn write_checkpoint(
     run_dir: &Path,
-    mut state: CheckpointState,
+    state: CheckpointState,
     fill: impl FnOnce(&Path) -> Result<()>,
 ) -> Result<PathBuf> {
     let root = run_dir.join(CHECKPOINTS_DIR);
     std::fs::create_dir_all(&root).map_err(|e| FmError::io(&root, e))?;
+    // a checkpoint is about as large as the one before it
+    let expected = list_checkpoints(run_dir)
+        .ok()
+        .and_then(|c| c.last().map(|c| folder_bytes(&c.dir)))
+        .unwrap_or(0);
+    mfm_files::space::ensure_space(&root, expected)?;
     let tmp = root.join(format!(
         ".tmp-step-{:09}-{}",
         state.step,
@@ -576,10 +585,29 @@ pub fn write_checkpoint(
     // (registered before it exists, so no moment leaves it unregistered)
     let _interruptible = mfm_files::interrupt::TemporaryDir::register(&tmp);
     std::fs::create_dir(&tmp).map_err(|e| FmError::io(&tmp, e))?;
-    fill(&tmp)?;
+    let written = fill_and_place(run_dir, &root, &tmp, state, fill);
+    if let Err(e) = written {
+        // nothing half-written stays; a full disk is said as such
+        let error = disk_full_or(e, &root, expected.max(folder_bytes(&tmp)));
+        let _ = std::fs::remove_dir_all(&tmp);
+        return Err(error);
+    }
+    written
+}
+
+/// [`write_checkpoint`] after its temporary folder `tmp` exists: the
+/// payload, the checksums, the state, the rename.
+fn fill_and_place(
+    run_dir: &Path,
+    root: &Path,
+    tmp: &Path,
+    mut state: CheckpointState,
+    fill: impl FnOnce(&Path) -> Result<()>,
+) -> Result<PathBuf> {
+    fill(tmp)?;
     let mut files = BTreeMap::new();
-    for entry in std::fs::read_dir(&tmp).map_err(|e| FmError::io(&tmp, e))? {
-        let entry = entry.map_err(|e| FmError::io(&tmp, e))?;
+    for entry in std::fs::read_dir(tmp).map_err(|e| FmError::io(tmp, e))? {
+        let entry = entry.map_err(|e| FmError::io(tmp, e))?;
         let Some(name) = entry.file_name().to_str().map(str::to_owned) else {
             continue;
         };
@@ -606,12 +634,49 @@ pub fn write_checkpoint(
     if dest.exists() {
         std::fs::remove_dir_all(&dest).map_err(|e| FmError::io(&dest, e))?;
     }
-    std::fs::rename(&tmp, &dest).map_err(|e| FmError::io(&dest, e))?;
+    std::fs::rename(tmp, &dest).map_err(|e| FmError::io(&dest, e))?;
     // persist the rename (best effort: not every platform can sync a folder)
-    if let Ok(d) = File::open(&root) {
+    if let Ok(d) = File::open(root) {
         let _ = d.sync_all();
     }
     Ok(dest)
+}
+
+/// The bytes of the files directly in `dir` (0 when it cannot be read).
+fn folder_bytes(dir: &Path) -> u64 {
+    std::fs::read_dir(dir)
+        .map(|entries| {
+            entries
+                .flatten()
+                .filter_map(|e| e.metadata().ok())
+                .filter(|m| m.is_file())
+                .map(|m| m.len())
+                .sum()
+        })
+        .unwrap_or(0)
+}
+
+/// `error`, or a [`mfm_files::FileError::NoSpace`] naming `root` when its
+/// file system is full (less free than [`mfm_files::space::margin`]): a
+/// write that failed for want of space, whatever layer reported it
+/// (libtorch's own writer among them), says so with the numbers.
+fn disk_full_or(error: FmError, root: &Path, needed: u64) -> FmError {
+    let full = matches!(
+        &error,
+        FmError::Files(mfm_files::FileError::Io { source, .. })
+            if source.kind() == std::io::ErrorKind::StorageFull
+    );
+    match mfm_files::space::available_bytes(root) {
+        Ok(Some(available)) if full || available < mfm_files::space::margin(available) / 2 => {
+            FmError::Files(mfm_files::FileError::NoSpace {
+                path: root.to_path_buf(),
+                needed,
+                margin: mfm_files::space::margin(available),
+                available,
+            })
+        }
+        _ => error,
+    }
 }
 
 /// Deletes all but the newest `keep` checkpoints; returns the deleted
@@ -791,5 +856,41 @@ mod tests {
             .map(|c| c.step)
             .collect();
         assert_eq!(steps, [10, 15]);
+    }
+
+    #[test]
+    fn a_failed_checkpoint_leaves_nothing_and_a_full_disk_says_so() {
+        let run = tempfile::tempdir().unwrap();
+        write_checkpoint(run.path(), state(5), fill).unwrap();
+        let only_step_5 = || {
+            let names: Vec<String> = std::fs::read_dir(run.path().join(CHECKPOINTS_DIR))
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            assert_eq!(names.len(), 1, "{names:?}");
+            assert!(names[0].contains("000000005"), "{names:?}");
+        };
+        // the disk fills up halfway through the payload
+        let full = |dir: &Path| -> Result<()> {
+            std::fs::write(dir.join(WEIGHTS_FILE), [0u8; 1000]).unwrap();
+            Err(FmError::io(
+                dir.join(OPTIMIZER_FILE),
+                std::io::Error::from(std::io::ErrorKind::StorageFull),
+            ))
+        };
+        let e = write_checkpoint(run.path(), state(10), full).unwrap_err();
+        let message = e.to_string();
+        assert!(
+            matches!(e, FmError::Files(mfm_files::FileError::NoSpace { .. }))
+                && message.contains("disk full")
+                && message.contains(CHECKPOINTS_DIR),
+            "{message}"
+        );
+        only_step_5();
+        // any other failure: its own error, and nothing left either
+        let broken = |_: &Path| -> Result<()> { Err(FmError::Config("broken".into())) };
+        let e = write_checkpoint(run.path(), state(10), broken).unwrap_err();
+        assert!(e.to_string().contains("broken"), "{e}");
+        only_step_5();
     }
 }

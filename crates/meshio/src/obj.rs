@@ -44,7 +44,7 @@
 
 use super::text::{lines, show, strip_comment};
 use super::{Parsed, ReadErrorKind, fmt_f64};
-use mfm_geometry::mesh::{MeshError, TriMesh};
+use mfm_geometry::mesh::TriMesh;
 use std::io::{BufRead, Read, Write};
 use std::ops::Range;
 
@@ -376,14 +376,10 @@ impl Prepared {
     /// The first face corner whose position index does not name a vertex.
     fn bad_index(&self) -> Option<ReadErrorKind> {
         let n = self.num_vertices;
-        // faces are fan-triangulated: face numbers in mesh errors count triangles
-        let mut triangles_before = 0usize;
         for s in &self.statements {
             let Some(face) = s.face else { continue };
             let corners = self.text(s).split_whitespace().skip(1);
-            let mut count = 0usize;
             for (c, corner) in corners.enumerate() {
-                count += 1;
                 let first = corner.split('/').next().unwrap_or_default();
                 let syntax = |message: String| {
                     Some(ReadErrorKind::Syntax {
@@ -407,15 +403,14 @@ impl Prepared {
                         "face {face} uses relative index {raw}, but only {defined} vertices are defined before it"
                     ));
                 } else if raw > 0 && raw.unsigned_abs() > n as u64 {
-                    // the first triangle of the fan (0, i, i+1) holding corner c
-                    return Some(ReadErrorKind::Mesh(MeshError::IndexOutOfRange {
-                        face: triangles_before + c.saturating_sub(2),
-                        index: raw.unsigned_abs() - 1,
-                        num_vertices: n,
-                    }));
+                    // the index as written (1-based), where the file has it
+                    return syntax(format!(
+                        "face {face} (corner {}) uses vertex index {raw}, but the file has only \
+                         {n} vertices (OBJ indices are 1 to {n})",
+                        c + 1
+                    ));
                 }
             }
-            triangles_before += count.saturating_sub(2);
         }
         None
     }

@@ -3,8 +3,10 @@
 //!
 //! `N` is a resolution parameter: subdivisions for `icosphere` (default 3)
 //! and `blob` (default 4, at most 8 for both), cells per side for `grid`
-//! (default 32, clamped to 1..=4096), and a resolution multiplier
-//! (default 1, clamped to 1..=64) for `uv-sphere`, `torus` and `capsule`.
+//! (default 32, 0 taken as 1, at most 1024), and a resolution multiplier
+//! (default 1, 0 taken as 1, at most 32) for `uv-sphere`, `torus` and
+//! `capsule`: every built-in mesh has at most about 1.6M vertices, and a
+//! larger `N` is refused before anything is built.
 //!
 //! [`load_mesh_spec_checked`] is the policy of every command that computes
 //! on a mesh: the problems [`MeshReport`] finds are warnings, except
@@ -47,11 +49,19 @@ pub enum MeshSpecError {
         /// The text after the second colon.
         value: String,
     },
-    /// More subdivisions than [`MAX_SUBDIVISIONS`].
-    #[error("{spec}: at most 8 subdivisions (the mesh would have over 1.3M vertices)")]
+    /// A resolution above the built-in mesh's cap (see the [module
+    /// docs](self)).
+    #[error(
+        "{spec}: the resolution is at most {max} for this mesh (it would have {vertices} \
+         vertices); for finer meshes subdivide a file with `mfm remesh --subdivide`"
+    )]
     TooFine {
         /// The name as given.
         spec: String,
+        /// The largest resolution taken.
+        max: u32,
+        /// The vertices the mesh would have had.
+        vertices: u64,
     },
     /// A name after `builtin:` that is not in [`BUILTINS`].
     #[error("{spec}: unknown built-in mesh `{name}` (known: {})", BUILTINS.join(", "))]
@@ -85,6 +95,10 @@ pub enum MeshSpecError {
 
 /// Most subdivisions of `icosphere` and `blob`.
 pub const MAX_SUBDIVISIONS: u32 = 8;
+/// Most cells per side of `grid`.
+pub const MAX_GRID_CELLS: u32 = 1024;
+/// Largest resolution multiplier of `uv-sphere`, `torus` and `capsule`.
+pub const MAX_MULTIPLIER: u32 = 32;
 
 /// Loads the mesh `spec` names: a file ([`read_mesh`], by extension) or a
 /// built-in mesh (see the [module docs](self)).
@@ -111,33 +125,47 @@ pub fn load_mesh_spec(spec: &str) -> Result<TriMesh, MeshSpecError> {
             source,
         })
     };
-    let subdivisions = |default: u32| {
-        let s = param.unwrap_or(default);
-        if s > MAX_SUBDIVISIONS {
+    // the resolution, refused above `max` (naming the vertices it would
+    // have made, from `vertices`)
+    let capped = |value: u32, max: u32, vertices: fn(u64) -> u64| {
+        if value > max {
             return Err(MeshSpecError::TooFine {
                 spec: spec.to_owned(),
+                max,
+                vertices: vertices(u64::from(value)),
             });
         }
-        Ok(s)
+        Ok(value)
     };
-    let multiplier = || param.unwrap_or(1).clamp(1, 64);
+    let icosphere_vertices = |s: u64| 10u64.saturating_mul(4u64.saturating_pow(s as u32)) + 2;
+    let subdivisions = |default: u32| {
+        capped(
+            param.unwrap_or(default),
+            MAX_SUBDIVISIONS,
+            icosphere_vertices,
+        )
+    };
+    let multiplier =
+        |per_unit: fn(u64) -> u64| capped(param.unwrap_or(1).max(1), MAX_MULTIPLIER, per_unit);
     match name {
         "icosphere" => Ok(procedural::icosphere(subdivisions(3)?)),
         "blob" => procedural(procedural::blob(subdivisions(4)?)),
         "uv-sphere" => {
-            let k = multiplier();
+            let k = multiplier(|k| (24 * k).saturating_mul(48 * k))?;
             procedural(procedural::uv_sphere(24 * k, 48 * k))
         }
         "torus" => {
-            let k = multiplier();
+            let k = multiplier(|k| (64 * k).saturating_mul(24 * k))?;
             procedural(procedural::torus(1.0, 0.4, 64 * k, 24 * k))
         }
         "capsule" => {
-            let k = multiplier();
+            let k = multiplier(|k| (16 * k).saturating_mul(48 * k))?;
             procedural(procedural::capsule(0.5, 0.75, 16 * k, 48 * k))
         }
         "grid" => {
-            let n = param.unwrap_or(32).clamp(1, 4096);
+            let n = capped(param.unwrap_or(32).max(1), MAX_GRID_CELLS, |n| {
+                (n + 1).saturating_mul(n + 1)
+            })?;
             procedural(procedural::plane_grid(n, n, 1.0, 1.0))
         }
         other => Err(MeshSpecError::UnknownBuiltin {
@@ -217,7 +245,25 @@ mod tests {
         let e = load_mesh_spec("builtin:icosphere:9")
             .map(|_| ())
             .unwrap_err();
-        assert!(matches!(e, MeshSpecError::TooFine { .. }), "{e}");
+        assert!(matches!(e, MeshSpecError::TooFine { max: 8, .. }), "{e}");
+        assert!(e.to_string().contains("2621442 vertices"), "{e}");
+        // every built-in is capped before anything is built
+        for (name, max) in [
+            ("grid", MAX_GRID_CELLS),
+            ("uv-sphere", MAX_MULTIPLIER),
+            ("torus", MAX_MULTIPLIER),
+            ("capsule", MAX_MULTIPLIER),
+        ] {
+            for n in [max + 1, 100_000, u32::MAX] {
+                let e = load_mesh_spec(&format!("builtin:{name}:{n}"))
+                    .map(|_| ())
+                    .unwrap_err();
+                assert!(
+                    matches!(e, MeshSpecError::TooFine { .. }),
+                    "{name}:{n}: {e}"
+                );
+            }
+        }
         let e = load_mesh_spec("builtin:grid:x").map(|_| ()).unwrap_err();
         assert_eq!(
             e.to_string(),

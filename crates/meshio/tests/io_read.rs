@@ -327,14 +327,12 @@ fn mesh_errors_from_files() {
         }))
     ));
     let obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4294967297\n";
-    assert!(matches!(
-        parse(obj, MeshFormat::Obj),
-        Err(ReadErrorKind::Mesh(MeshError::IndexOutOfRange {
-            index: 4294967296,
-            num_vertices: 3,
-            ..
-        }))
-    ));
+    let (line, message) = obj_syntax_error(obj);
+    assert_eq!(line, 4);
+    assert!(
+        message.contains("vertex index 4294967297") && message.contains("only 3 vertices"),
+        "{message}"
+    );
 }
 
 #[test]
@@ -480,18 +478,21 @@ fn obj_errors_name_the_line_and_what_is_wrong() {
     let (line, message) = obj_syntax_error(format!("{tri}f 1 \\\n 2 \\\n 0\n").as_bytes());
     assert_eq!(line, 4);
     assert!(message.contains("start at 1"), "{message}");
-    // an index past the last vertex: the triangle of the fan that holds it
-    // (face 1 is a pentagon (0,1,2,3,4) split into triangles 1, 2, 3; corner 3
-    // first appears in triangle 2)
+    // an index past the last vertex: its line, and the index as written
+    // (OBJ counts from 1), not the 0-based one of the mesh
     let text = format!("{tri}v 1 1 0\nv 2 2 0\nf 1 2 3\nf 1 2 3 9 4\n");
-    assert!(matches!(
-        parse(text.as_bytes(), MeshFormat::Obj),
-        Err(ReadErrorKind::Mesh(MeshError::IndexOutOfRange {
-            face: 2,
-            index: 8,
-            num_vertices: 5
-        }))
-    ));
+    let (line, message) = obj_syntax_error(text.as_bytes());
+    assert_eq!(line, 7);
+    assert!(
+        message.contains("face 1 (corner 4) uses vertex index 9")
+            && message.contains("only 5 vertices"),
+        "{message}"
+    );
+    let (_, message) = obj_syntax_error(format!("{tri}f 1 2 5\n").as_bytes());
+    assert!(
+        message.contains("vertex index 5") && message.contains("1 to 3"),
+        "{message}"
+    );
     // faces of zero, one and two corners
     for (corners, arity) in [("", 0), (" 1", 1), (" 1 2", 2)] {
         let text = format!("{tri}f{corners}\n");

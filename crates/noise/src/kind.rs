@@ -11,6 +11,13 @@ use crate::error::{NoiseError, Result};
 /// Default screening weight `tau` of the paper's experiments (`tau = 100`).
 pub const DEFAULT_TAU: f64 = 100.0;
 
+/// The largest screening weight `tau` taken: far above the largest
+/// Laplacian eigenvalue of any practical mesh (about `1 / h^2` for edge
+/// length `h`), where Matérn noise is only white noise divided by `tau`,
+/// vanishing (at `1e300` every value underflows to zero and every sample
+/// is the same).
+pub const MAX_TAU: f64 = 1e10;
+
 /// Default factor `c` of [`NoiseKind::MaternNormalized`] in the long form
 /// ([`NoiseKind::from_parts`]).
 pub const DEFAULT_NORMALIZED_C: f64 = 1e-4;
@@ -154,8 +161,8 @@ pub enum NoiseKind {
 }
 
 impl NoiseKind {
-    /// Checks the parameters: `tau >= 0` for Matérn and explicit, `c > 0`,
-    /// `k >= 1`, all finite.
+    /// Checks the parameters: `tau` in `[0, MAX_TAU]` for Matérn and
+    /// explicit, `c > 0`, `k >= 1`, all finite.
     ///
     /// # Errors
     /// [`NoiseError::InvalidParameter`] naming the offending parameter.
@@ -169,9 +176,12 @@ impl NoiseKind {
         };
         match *self {
             Self::Naive | Self::White => Ok(()),
-            Self::Matern { tau } if !(tau.is_finite() && tau >= 0.0) => {
-                bad("tau", "a finite value >= 0 (0: no screening)", tau)
-            }
+            Self::Matern { tau } if !(tau.is_finite() && (0.0..=MAX_TAU).contains(&tau)) => bad(
+                "tau",
+                "in [0, 1e10] (0: no screening; the paper uses 100; larger values make the noise \
+                 vanish)",
+                tau,
+            ),
             Self::MaternNormalized { c } if !(c.is_finite() && c > 0.0) => {
                 bad("c", "a finite value > 0", c)
             }
@@ -180,8 +190,8 @@ impl NoiseKind {
                 expected: "at least 1 eigenpair",
                 found: "0".to_owned(),
             }),
-            Self::Explicit { tau, .. } if !(tau.is_finite() && tau >= 0.0) => {
-                bad("tau", "a finite value >= 0", tau)
+            Self::Explicit { tau, .. } if !(tau.is_finite() && (0.0..=MAX_TAU).contains(&tau)) => {
+                bad("tau", "in [0, 1e10]", tau)
             }
             _ => Ok(()),
         }
