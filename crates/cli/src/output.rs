@@ -51,3 +51,40 @@ pub fn clean_up_on_interrupt() {
         );
     }
 }
+
+/// Signals that come before `main` installs the command's own handler (a
+/// network build spends its first fraction of a second in libtorch's
+/// start-up, before any Rust code runs) end the process as an interrupt
+/// does: status 130, with nothing written yet to remove. Installed from
+/// the executable's `.preinit_array`, which runs before every shared
+/// library's initializers; the command's handler replaces it.
+#[cfg(target_os = "linux")]
+mod early_signals {
+    /// What the early handler prints (one `write`, async-signal-safe).
+    const MESSAGE: &[u8] = b"\nmfm: interrupted while starting; nothing was written\n";
+
+    extern "C" fn exit_interrupted(_: libc::c_int) {
+        // SAFETY: write and _exit are async-signal-safe; MESSAGE is static.
+        unsafe {
+            libc::write(2, MESSAGE.as_ptr().cast(), MESSAGE.len());
+            libc::_exit(130);
+        }
+    }
+
+    extern "C" fn install() {
+        // SAFETY: a zeroed sigaction with a handler and an empty mask is
+        // valid; nothing else runs yet in this process.
+        unsafe {
+            let mut action: libc::sigaction = std::mem::zeroed();
+            action.sa_sigaction = exit_interrupted as *const () as libc::sighandler_t;
+            libc::sigemptyset(&mut action.sa_mask);
+            for signal in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+                libc::sigaction(signal, &action, std::ptr::null_mut());
+            }
+        }
+    }
+
+    #[used]
+    #[unsafe(link_section = ".preinit_array")]
+    static INSTALL: extern "C" fn() = install;
+}

@@ -422,3 +422,60 @@ fn obj_index_errors_count_as_the_file_does() {
     let e = refused(d, &["info", "bad.obj"], "vertex index 5");
     assert!(e.contains("line 6") && e.contains("1 to 4"), "{e}");
 }
+
+/// (A network build: its start-up in libtorch is the window this checks.)
+#[test]
+#[cfg(all(target_os = "linux", feature = "network"))]
+fn a_signal_while_starting_is_an_interrupt_too() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    for signal in ["-TERM", "-HUP", "-INT"] {
+        let child = std::process::Command::new(env!("CARGO_BIN_EXE_mfm"))
+            .current_dir(d)
+            .args([
+                "dataset",
+                "gmm",
+                "--mesh",
+                "builtin:icosphere:1",
+                "--out",
+                "g",
+            ])
+            .stderr(std::process::Stdio::piped())
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        // as soon as the process catches the three signals: past the
+        // dynamic loader (no code of any kind runs before it), in the
+        // libraries' start-up or later (then the command's own handler
+        // answers the same)
+        let caught = |pid: u32| {
+            let status = fs::read_to_string(format!("/proc/{pid}/status")).unwrap_or_default();
+            status
+                .lines()
+                .find_map(|l| l.strip_prefix("SigCgt:"))
+                .and_then(|m| u64::from_str_radix(m.trim(), 16).ok())
+                .is_some_and(|m| m & 0x4003 == 0x4003)
+        };
+        let t0 = std::time::Instant::now();
+        while !caught(child.id()) {
+            assert!(t0.elapsed().as_secs() < 60, "no handler installed");
+            std::thread::sleep(std::time::Duration::from_micros(200));
+        }
+        let sent = std::process::Command::new("kill")
+            .args([signal, &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(sent.success());
+        let o = child.wait_with_output().unwrap();
+        assert_eq!(o.status.code(), Some(130), "{signal}: {}", common::err(&o));
+        // the handler was there before the libraries finished starting
+        // (a network build spends ~0.15 s there; polling takes 0.2 ms)
+        assert!(
+            common::err(&o).contains("while starting"),
+            "{signal}: {}",
+            common::err(&o)
+        );
+        let left: Vec<_> = fs::read_dir(d).unwrap().collect();
+        assert!(left.is_empty(), "{signal}: {left:?}");
+    }
+}
