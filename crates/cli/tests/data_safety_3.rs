@@ -479,3 +479,45 @@ fn a_signal_while_starting_is_an_interrupt_too() {
         assert!(left.is_empty(), "{signal}: {left:?}");
     }
 }
+
+#[test]
+#[cfg(unix)]
+fn devices_and_fifos_are_refused_as_inputs() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    std::os::unix::fs::symlink("/dev/zero", d.join("zero.obj")).unwrap();
+    std::os::unix::fs::symlink("/dev/urandom", d.join("random.npy")).unwrap();
+    let fifo = d.join("fifo.npy");
+    assert!(
+        std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let started = std::time::Instant::now();
+    refused(d, &["info", "zero.obj"], "a device, not a regular file");
+    refused(
+        d,
+        &["noise", "zero.obj", "--out", "n.npy"],
+        "not a regular file",
+    );
+    ok(d, &["convert", "builtin:icosphere:1", "ico.ply"]);
+    for samples in ["random.npy", "fifo.npy"] {
+        refused(
+            d,
+            &[
+                "eval",
+                "--samples",
+                samples,
+                "--space",
+                "space.json",
+                "--mesh",
+                "ico.ply",
+            ],
+            "not a regular file",
+        );
+    }
+    // refused at once: nothing was read until memory ran out, nothing blocked
+    assert!(started.elapsed().as_secs() < 60);
+}

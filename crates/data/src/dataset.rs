@@ -804,7 +804,7 @@ struct NpyInfo {
 /// Reads and checks the header of `signals.npy`: dtype `<f4`, C order,
 /// rank 3, and a file long enough for the whole array.
 fn read_npy_header(path: &Path) -> Result<NpyInfo> {
-    let file = File::open(path).map_err(|e| DataError::io(path, e))?;
+    let file = mfm_files::open_regular(path)?;
     let file_len = file.metadata().map_err(|e| DataError::io(path, e))?.len();
     let mut reader = BufReader::new(file);
     let header = npyz::NpyHeader::from_reader(&mut reader)

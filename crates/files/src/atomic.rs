@@ -237,6 +237,41 @@ pub fn resolve_target(path: &Path) -> Result<PathBuf, FileError> {
     ))
 }
 
+/// Opens the input `path` for reading when it is a regular file (after
+/// following symbolic links): a device (`/dev/zero`, which never ends), a
+/// FIFO (which blocks until someone writes), a socket or a folder is
+/// refused before anything is read.
+///
+/// # Errors
+/// [`FileError::InputNotRegular`] naming the path and what it is;
+/// [`FileError::Io`] when it cannot be opened.
+pub fn open_regular(path: &Path) -> Result<fs::File, FileError> {
+    let meta = fs::metadata(path).map_err(|e| FileError::io(path, e))?;
+    if !meta.is_file() {
+        return Err(FileError::InputNotRegular {
+            path: path.to_path_buf(),
+            kind: kind_of(&meta.file_type()),
+        });
+    }
+    fs::File::open(path).map_err(|e| FileError::io(path, e))
+}
+
+/// All of the regular file `path` ([`open_regular`]); at most the size
+/// its metadata gave when opened.
+///
+/// # Errors
+/// As [`open_regular`]; [`FileError::Io`] when reading fails.
+pub fn read_regular(path: &Path) -> Result<Vec<u8>, FileError> {
+    use std::io::Read;
+    let file = open_regular(path)?;
+    let size = file.metadata().map_err(|e| FileError::io(path, e))?.len();
+    let mut bytes = Vec::with_capacity(usize::try_from(size).unwrap_or(0));
+    file.take(size)
+        .read_to_end(&mut bytes)
+        .map_err(|e| FileError::io(path, e))?;
+    Ok(bytes)
+}
+
 /// "a folder", "a device", ... for a file type that is not a regular file.
 pub(crate) fn kind_of(t: &fs::FileType) -> &'static str {
     #[cfg(unix)]

@@ -55,6 +55,17 @@ pub enum FileError {
         /// The entry that shows it.
         marker: String,
     },
+    /// An input is not a regular file.
+    #[error(
+        "{} is {kind}, not a regular file; mfm reads its inputs from regular files only",
+        path.display()
+    )]
+    InputNotRegular {
+        /// The input as given.
+        path: PathBuf,
+        /// What it is: "a folder", "a device", "a FIFO", "a socket".
+        kind: &'static str,
+    },
     /// An output folder's path holds a file (or anything but a folder).
     #[error(
         "{} exists and is not a folder; this command writes a folder of files there: choose \

@@ -39,7 +39,7 @@ pub mod space;
 pub mod text;
 pub mod undo;
 
-pub use atomic::{AtomicFile, write_atomic, write_json};
+pub use atomic::{AtomicFile, open_regular, read_regular, write_atomic, write_json};
 pub use error::FileError;
 pub use guard::{Outputs, ensure_empty_dir};
 pub use lock::FolderLock;

@@ -61,7 +61,7 @@ impl Float for f64 {
 /// naming the file, for anything that is not a C-order float array whose
 /// data length matches its shape.
 pub fn read<T: Float>(path: &Path) -> Result<Array<T>, FileError> {
-    let bytes = std::fs::read(path).map_err(|e| FileError::io(path, e))?;
+    let bytes = crate::read_regular(path)?;
     from_bytes(&bytes).map_err(|message| FileError::format(path, message))
 }
 

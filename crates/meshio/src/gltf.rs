@@ -205,7 +205,9 @@ fn load_buffers(gltf: &::gltf::Gltf, base: Option<&Path>) -> Result<Vec<Vec<u8>>
                     buffer.index()
                 ))
             })?,
-            ::gltf::buffer::Source::Uri(uri) => read_uri(uri, base, buffer.index())?,
+            ::gltf::buffer::Source::Uri(uri) => {
+                read_uri(uri, base, buffer.index(), buffer.length())?
+            }
         };
         if data.len() < buffer.length() {
             return Err(invalid(format!(
@@ -220,7 +222,17 @@ fn load_buffers(gltf: &::gltf::Gltf, base: Option<&Path>) -> Result<Vec<Vec<u8>>
     Ok(out)
 }
 
-fn read_uri(uri: &str, base: Option<&Path>, index: usize) -> Result<Vec<u8>, ReadErrorKind> {
+/// The bytes of buffer `index`, `declared` long, from its URI: a base64
+/// data URI, or a file in the glTF file's folder `base` (or below it; a
+/// path that leads elsewhere is refused), a regular file of the declared
+/// length (up to 3 bytes of alignment padding more), of which only the
+/// declared bytes are read.
+fn read_uri(
+    uri: &str,
+    base: Option<&Path>,
+    index: usize,
+    declared: usize,
+) -> Result<Vec<u8>, ReadErrorKind> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let payload = rest.split_once(";base64,").map(|(_, p)| p).ok_or_else(|| {
             ReadErrorKind::Unsupported(format!("buffer {index}: only base64 data URIs are read"))
@@ -247,12 +259,54 @@ fn read_uri(uri: &str, base: Option<&Path>, index: usize) -> Result<Vec<u8>, Rea
         )));
     };
     let path = base.join(&relative);
-    std::fs::read(&path).map_err(|e| {
+    let cannot = |e: &dyn std::fmt::Display| {
         invalid(format!(
             "buffer {index}: cannot read `{}`: {e}",
             path.display()
         ))
-    })
+    };
+    // judged by the URI's own path (`..` resolved as written): a link the
+    // user put in the folder is theirs to follow
+    let folder = lexical(base);
+    let resolved = lexical(&path);
+    if Path::new(&relative).is_absolute() || !resolved.starts_with(&folder) {
+        return Err(invalid(format!(
+            "buffer {index}: `{relative}` lies outside the glTF file's folder {}; buffers are \
+             read from that folder (or below it) only",
+            folder.display()
+        )));
+    }
+    let file = mfm_files::open_regular(&resolved).map_err(|e| cannot(&e))?;
+    let size = file.metadata().map_err(|e| cannot(&e))?.len();
+    if size < declared as u64 || size > declared as u64 + 3 {
+        return Err(invalid(format!(
+            "buffer {index}: `{relative}` holds {size} bytes but the buffer declares {declared}"
+        )));
+    }
+    let mut bytes = Vec::with_capacity(declared);
+    std::io::Read::read_to_end(&mut std::io::Read::take(file, declared as u64), &mut bytes)
+        .map_err(|e| cannot(&e))?;
+    Ok(bytes)
+}
+
+/// `path` with `.` and `..` removed as written (no link followed), made
+/// absolute against the working folder.
+fn lexical(path: &Path) -> std::path::PathBuf {
+    use std::path::Component;
+    let absolute = std::env::current_dir()
+        .map(|d| d.join(path))
+        .unwrap_or_else(|_| path.to_path_buf());
+    let mut out = std::path::PathBuf::new();
+    for part in absolute.components() {
+        match part {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out
 }
 
 /// Decodes `%XX` escapes; `None` on a malformed escape or non-UTF-8 result.

@@ -191,6 +191,13 @@ pub enum ReadErrorKind {
     /// The operating system could not read the file.
     #[error("{0}")]
     Io(std::io::Error),
+    /// The path names a device, FIFO, socket or folder (read until memory
+    /// runs out, or forever); refused before anything is read.
+    #[error("this is {kind}, not a regular file; meshes are read from regular files only")]
+    NotRegular {
+        /// What it is: "a device", "a FIFO", "a socket", "a folder".
+        kind: &'static str,
+    },
     /// A text line (or a PLY header line) does not parse.
     #[error("line {line}: {message}")]
     Syntax {
@@ -329,7 +336,16 @@ pub fn read_mesh_with_scalars(
 ) -> Result<(TriMesh, VertexScalars), ReadError> {
     let path = path.as_ref();
     let format = format_of(path)?;
-    let bytes = std::fs::read(path).map_err(|e| ReadError::new(path, ReadErrorKind::Io(e)))?;
+    let bytes = mfm_files::read_regular(path).map_err(|e| {
+        let kind = match e {
+            mfm_files::FileError::InputNotRegular { kind, .. } => {
+                ReadErrorKind::NotRegular { kind }
+            }
+            mfm_files::FileError::Io { source, .. } => ReadErrorKind::Io(source),
+            other => ReadErrorKind::Io(std::io::Error::other(other.to_string())),
+        };
+        ReadError::new(path, kind)
+    })?;
     let base = path.parent().map(|p| {
         if p.as_os_str().is_empty() {
             Path::new(".")

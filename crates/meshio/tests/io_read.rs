@@ -107,7 +107,28 @@ fn unknown_extension_and_missing_file() {
     let folder = dir.path().join("folder.off");
     std::fs::create_dir(&folder).expect("mkdir");
     let e = mfm_meshio::read_mesh(&folder).expect_err("a directory");
-    assert!(matches!(e.kind(), ReadErrorKind::Io(_)), "{e}");
+    assert!(
+        matches!(e.kind(), ReadErrorKind::NotRegular { kind: "a folder" }),
+        "{e}"
+    );
+    // a device (read until memory runs out) or a FIFO (read forever) is
+    // refused before anything is read, also behind a link with a mesh name
+    #[cfg(unix)]
+    {
+        let zero = dir.path().join("zero.obj");
+        std::os::unix::fs::symlink("/dev/zero", &zero).expect("link");
+        let e = mfm_meshio::read_mesh(&zero).expect_err("a device");
+        assert!(
+            matches!(e.kind(), ReadErrorKind::NotRegular { kind: "a device" }),
+            "{e}"
+        );
+        let fifo = dir.path().join("fifo.off");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        if made.is_ok_and(|s| s.success()) {
+            let e = mfm_meshio::read_mesh(&fifo).expect_err("a FIFO");
+            assert!(e.to_string().contains("a FIFO"), "{e}");
+        }
+    }
     let e = mfm_meshio::read_mesh(bad_fixture("no_extension")).expect_err("no extension");
     assert!(matches!(e.kind(), ReadErrorKind::UnknownFormat { found } if found == "(none)"));
 }
@@ -905,6 +926,56 @@ fn gltf_data_uri_fan_and_external_buffers() {
         parse(json.as_bytes(), MeshFormat::Gltf),
         Err(ReadErrorKind::Unsupported(msg)) if msg.contains("my data.bin")
     ));
+    // a buffer file is read from the glTF file's folder only, never past
+    // its declared length, and only from a regular file
+    let outside = tempfile::tempdir().expect("tempdir");
+    std::fs::write(outside.path().join("secret.bin"), &bin).expect("write");
+    let escaping = format!(
+        r#","uri":"../{}/secret.bin""#,
+        outside.path().file_name().unwrap().to_string_lossy()
+    );
+    let sub = dir.path().join("sub");
+    std::fs::create_dir(&sub).expect("mkdir");
+    std::fs::write(sub.join("data.bin"), &bin).expect("write bin");
+    for (uri, needle) in [
+        (escaping.as_str(), "outside the glTF file's folder"),
+        (
+            r#","uri":"file:///etc/passwd""#,
+            "outside the glTF file's folder",
+        ),
+        (r#","uri":"sub/data.bin""#, ""),
+    ] {
+        let json = gltf_json(accessor, fan, uri, 48, views);
+        std::fs::write(&path, &json).expect("write gltf");
+        let read = mfm_meshio::read_mesh(&path);
+        if needle.is_empty() {
+            assert_eq!(read.expect("a buffer in a subfolder"), m);
+        } else {
+            let e = read.expect_err(uri);
+            assert!(e.to_string().contains(needle), "{uri}: {e}");
+        }
+    }
+    std::fs::write(
+        dir.path().join("long.bin"),
+        [bin.clone(), vec![0u8; 64]].concat(),
+    )
+    .expect("write bin");
+    let json = gltf_json(accessor, fan, r#","uri":"long.bin""#, 48, views);
+    std::fs::write(&path, &json).expect("write gltf");
+    let e = mfm_meshio::read_mesh(&path).expect_err("longer than declared");
+    assert!(
+        e.to_string()
+            .contains("holds 112 bytes but the buffer declares 48"),
+        "{e}"
+    );
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("/dev/zero", dir.path().join("zero.bin")).expect("link");
+        let json = gltf_json(accessor, fan, r#","uri":"zero.bin""#, 48, views);
+        std::fs::write(&path, &json).expect("write gltf");
+        let e = mfm_meshio::read_mesh(&path).expect_err("a device");
+        assert!(e.to_string().contains("a device"), "{e}");
+    }
     // a malformed percent escape is an error, not a panic
     let json = gltf_json(accessor, fan, r#","uri":"%FF%FE.bin""#, 48, views);
     std::fs::write(&path, &json).expect("write gltf");

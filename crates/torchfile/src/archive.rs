@@ -51,10 +51,19 @@ impl Checkpoint {
     /// the reader does not build.
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref().to_path_buf();
-        let file = File::open(&path).map_err(|source| TorchFileError::Io {
+        let io = |source| TorchFileError::Io {
             path: path.clone(),
             source,
-        })?;
+        };
+        // a device or FIFO would be read forever: regular files only
+        let meta = std::fs::metadata(&path).map_err(io)?;
+        if !meta.is_file() {
+            return Err(io(std::io::Error::other(
+                "not a regular file (a device, FIFO, socket or folder); checkpoints are read \
+                 from regular files only",
+            )));
+        }
+        let file = File::open(&path).map_err(io)?;
         let archive_error = |message: String| TorchFileError::Archive {
             path: path.clone(),
             message,

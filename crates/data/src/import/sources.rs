@@ -4,7 +4,6 @@
 //! signals of `C` values per template vertex, read one at a time, each
 //! with the name a user knows it by.
 
-use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 
@@ -182,7 +181,7 @@ impl NpyRows {
     /// a dtype other than little-endian `float32`/`float64`, Fortran order,
     /// another rank, or fewer bytes than the shape needs.
     pub fn open(path: &Path, positions: bool) -> Result<Self> {
-        let file = File::open(path).map_err(|e| DataError::io(path, e))?;
+        let file = mfm_files::open_regular(path)?;
         let file_len = file.metadata().map_err(|e| DataError::io(path, e))?.len();
         let mut reader = BufReader::new(file);
         let header = npyz::NpyHeader::from_reader(&mut reader)
@@ -285,7 +284,7 @@ impl SignalFiles for NpyRows {
         }
         let row = self.vertices * self.channels;
         let mut bytes = vec![0u8; row * self.value_bytes];
-        let mut file = File::open(&self.path).map_err(|e| DataError::io(&self.path, e))?;
+        let mut file = mfm_files::open_regular(&self.path)?;
         file.seek(SeekFrom::Start(
             self.data_offset + (i * row * self.value_bytes) as u64,
         ))
