@@ -2,7 +2,6 @@
 //! training and reference sets written as dataset folders.
 
 use crate::mesh::load_mesh_checked;
-use crate::output::ensure_empty;
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use mfm_data::deformations::{self, DeformMeshes};
@@ -303,8 +302,7 @@ fn dataset_pairs(a: PairsArgs) -> Result<()> {
              pass --mesh FILE or --mesh builtin:NAME"
         ),
     };
-    let _lock = crate::output::lock_folder(&a.out)?;
-    ensure_empty(&a.out)?;
+    let _lock = crate::output::claim_dataset_folder(&a.out)?;
     let t0 = std::time::Instant::now();
     let (meshes, poses) = a.pose.meshes_and_space(&spec)?;
     let mut family = ShapeFamily::auto(&meshes.original, a.regions)
@@ -345,8 +343,7 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
     if a.n == 0 {
         bail!("--n must be at least 1");
     }
-    let _lock = crate::output::lock_folder(&a.out)?;
-    ensure_empty(&a.out)?;
+    let _lock = crate::output::claim_dataset_folder(&a.out)?;
     let t0 = std::time::Instant::now();
     let (meshes, space) = a.pose.meshes_and_space(&a.mesh)?;
     print_meshes(&meshes, Some(&space))?;
@@ -388,8 +385,7 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
     if a.n == 0 {
         bail!("--n must be at least 1");
     }
-    let _lock = crate::output::lock_folder(&a.out)?;
-    ensure_empty(&a.out)?;
+    let _lock = crate::output::claim_dataset_folder(&a.out)?;
     let (train_mesh, test_mesh, source) = match (&a.mesh, &a.test_mesh) {
         (None, None) => {
             let m = GmmMeshes::builtin()?;
@@ -490,8 +486,7 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
         .inputs(&inputs_read)
         .output(&a.out)
         .check()?;
-    let _lock = crate::output::lock_folder(&a.out)?;
-    ensure_empty(&a.out)?;
+    let _lock = crate::output::claim_dataset_folder(&a.out)?;
     let mut skipped = 0;
     let mut paired = false;
     let (template, template_name, source): (mfm_geometry::TriMesh, String, Box<dyn SignalFiles>) =

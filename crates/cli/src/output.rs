@@ -35,6 +35,46 @@ pub fn lock_folder(dir: &Path) -> Result<mfm_files::FolderLock> {
     Ok(mfm_files::FolderLock::acquire(dir, &command.join(" "))?)
 }
 
+/// Locks the folder `dir` an `mfm dataset` command fills and checks it is
+/// empty. When the lock was left by an `mfm dataset` command that was
+/// killed (SIGKILL, a crash) and the folder holds only what such a command
+/// writes ([`mfm_data::layout::EXPERIMENT_ENTRIES`]), that half-made
+/// experiment is removed first, and said.
+///
+/// # Errors
+/// [`mfm_files::FileError::Locked`]; a folder that is not empty.
+pub fn claim_dataset_folder(dir: &Path) -> Result<mfm_files::FolderLock> {
+    let lock = lock_folder(dir)?;
+    if let Some(holder) = lock.taken_over()
+        && holder.contains(" dataset ")
+        && let Ok(entries) = std::fs::read_dir(dir)
+    {
+        let names: Vec<std::ffi::OsString> = entries.flatten().map(|e| e.file_name()).collect();
+        let ours = |n: &std::ffi::OsString| {
+            n.to_str().is_some_and(|n| {
+                n.starts_with('.') || mfm_data::layout::EXPERIMENT_ENTRIES.contains(&n)
+            })
+        };
+        if !names.is_empty() && names.iter().all(ours) {
+            mfm_files::interrupt::remove_stale_temporaries(dir, None);
+            for name in &names {
+                let path = dir.join(name);
+                if path.is_dir() {
+                    let _ = std::fs::remove_dir_all(&path);
+                } else {
+                    let _ = std::fs::remove_file(&path);
+                }
+            }
+            eprintln!(
+                "note: {} held what a killed command left ({holder}); removed it",
+                dir.display()
+            );
+        }
+    }
+    ensure_empty(dir)?;
+    Ok(lock)
+}
+
 /// Installs the handler of SIGINT, SIGTERM and SIGHUP of every command but
 /// `train` (which checkpoints instead): it removes what the command had
 /// created, temporaries, half-filled folders and its lock included

@@ -521,3 +521,104 @@ fn devices_and_fifos_are_refused_as_inputs() {
     // refused at once: nothing was read until memory ran out, nothing blocked
     assert!(started.elapsed().as_secs() < 60);
 }
+
+/// Runs `mfm ARGS` in `dir` and kills it (SIGKILL) once `ready` holds;
+/// `false` when the command finished first.
+fn killed_when(dir: &Path, args: &[&str], ready: impl Fn() -> bool) -> bool {
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_mfm"))
+        .current_dir(dir)
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let t0 = std::time::Instant::now();
+    loop {
+        if ready() {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            return true;
+        }
+        if child.try_wait().unwrap().is_some() {
+            return false;
+        }
+        assert!(t0.elapsed().as_secs() < 300, "{args:?} never got there");
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+}
+
+#[test]
+fn what_a_killed_dataset_command_left_is_cleared_by_the_next_one() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    let deform = [
+        "dataset",
+        "deform",
+        "--mesh",
+        "builtin:capsule",
+        "--n",
+        "40",
+        "--reference",
+        "4",
+        "--coarse-faces",
+        "600",
+        "--out",
+        "dd",
+    ];
+    // killed after its meshes and space, before its sets
+    assert!(killed_when(d, &deform, || d.join("dd/space.json").exists()));
+    assert!(d.join("dd").exists() && d.join(".dd.mfm-lock").exists());
+    let o = ok(d, &deform);
+    assert!(
+        common::err(&o).contains("what a killed command left"),
+        "{}",
+        common::err(&o)
+    );
+    assert!(d.join("dd/train/signals.npy").is_file());
+    // a folder with anything else in it is never cleared
+    fs::create_dir(d.join("mine")).unwrap();
+    fs::write(d.join("mine/notes.txt"), "mine").unwrap();
+    fs::write(d.join("mine/space.json"), "{}").unwrap();
+    fs::write(
+        d.join(".mine.mfm-lock"),
+        "PID 999999999 (mfm dataset deform)\n",
+    )
+    .unwrap();
+    let mut again = deform.to_vec();
+    *again.last_mut().unwrap() = "mine";
+    refused(d, &again, "not empty");
+    assert_eq!(
+        fs::read_to_string(d.join("mine/notes.txt")).unwrap(),
+        "mine"
+    );
+}
+
+#[test]
+#[cfg(feature = "network")]
+fn a_killed_sample_leaves_nothing_that_stops_the_rerun() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    tiny_run(d);
+    let args = [
+        "sample",
+        "--run",
+        "tiny",
+        "--mesh",
+        "builtin:icosphere:5",
+        "--n",
+        "64",
+        "--out",
+        "s",
+    ];
+    let temporary = || {
+        fs::read_dir(d.join("s")).is_ok_and(|e| {
+            e.flatten()
+                .any(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+        })
+    };
+    assert!(killed_when(d, &args, temporary));
+    assert!(temporary(), "the kill left its temporary");
+    ok(d, &args);
+    assert!(d.join("s/samples.npy").is_file());
+    assert!(!temporary());
+}

@@ -72,6 +72,23 @@ pub const PREVIEW: &str = "preview.png";
 /// The mesh files of a deformation experiment, by role.
 pub const DEFORM_MESHES: [&str; 3] = ["original.ply", "coarse.ply", "eval.ply"];
 
+/// Every entry an `mfm dataset` command (gmm, deform, pairs, import)
+/// writes in its folder: what a killed one may have left there.
+pub const EXPERIMENT_ENTRIES: [&str; 12] = [
+    TRAIN,
+    REFERENCE,
+    HOLDOUT,
+    TEST_MESH,
+    SPACE,
+    PAIR_SPACE,
+    PREVIEW,
+    DEFORM_MESHES[0],
+    DEFORM_MESHES[1],
+    DEFORM_MESHES[2],
+    crate::import::TRANSFER,
+    crate::import::SUMMARY,
+];
+
 /// The seed of an experiment's held-out sets, given the training seed.
 pub fn held_out_seed(seed: u64) -> u64 {
     seed ^ 0x5eed_0f2e_f5e7

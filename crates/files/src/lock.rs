@@ -32,6 +32,9 @@ use std::path::{Path, PathBuf};
 pub struct FolderLock {
     path: PathBuf,
     _file: File,
+    /// The holder line of a lock file a killed writer left, when this lock
+    /// took it over.
+    taken_over: Option<String>,
     /// Its entry in [`crate::interrupt`].
     id: u64,
 }
@@ -61,8 +64,8 @@ impl FolderLock {
                 .truncate(false)
                 .open(&path)
                 .map_err(|e| FileError::io(&path, e))?;
-            match try_flock(&file) {
-                Ok(true) => {}
+            let left_by = match try_flock(&file) {
+                Ok(true) => holder_of(&mut file),
                 Ok(false) => {
                     return Err(FileError::Locked {
                         path: dir.to_path_buf(),
@@ -81,8 +84,9 @@ impl FolderLock {
                             holder,
                         });
                     }
+                    holder
                 }
-            }
+            };
             // The holder before us may have removed the file after we opened
             // it: then our lock is on a file nobody else sees; start over.
             if !same_file(&file, &path) {
@@ -94,9 +98,12 @@ impl FolderLock {
                 .and_then(|()| file.sync_all())
                 .map_err(|e| FileError::io(&path, e))?;
             let id = crate::interrupt::register(crate::interrupt::Pending::File(path.clone()));
+            // a holder line in a file nobody holds: its writer was killed
+            let taken_over = holder_pid(&left_by).is_some().then_some(left_by);
             return Ok(Self {
                 path,
                 _file: file,
+                taken_over,
                 id,
             });
         }
@@ -105,6 +112,14 @@ impl FolderLock {
     /// The lock file.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// The holder line (`PID 123 (mfm dataset deform ...)`) of the lock
+    /// file a killed writer left, when this lock took it over: what is in
+    /// the folder may be that writer's half-finished work. `None` when the
+    /// folder was free.
+    pub fn taken_over(&self) -> Option<&str> {
+        self.taken_over.as_deref()
     }
 }
 

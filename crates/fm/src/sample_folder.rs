@@ -59,6 +59,8 @@ pub fn check_output_folder(
             out.display()
         )));
     }
+    // the temporaries of a writer killed here (SIGKILL) are not content
+    mfm_files::interrupt::remove_stale_temporaries(out, None);
     let non_empty = std::fs::read_dir(out).is_ok_and(|mut d| d.next().is_some());
     if non_empty && !replace {
         return Err(FmError::RunFolder(format!(
