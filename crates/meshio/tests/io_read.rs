@@ -932,7 +932,11 @@ fn gltf_data_uri_fan_and_external_buffers() {
     std::fs::write(outside.path().join("secret.bin"), &bin).expect("write");
     let escaping = format!(
         r#","uri":"../{}/secret.bin""#,
-        outside.path().file_name().unwrap().to_string_lossy()
+        outside
+            .path()
+            .file_name()
+            .expect("a temporary folder has a name")
+            .to_string_lossy()
     );
     let sub = dir.path().join("sub");
     std::fs::create_dir(&sub).expect("mkdir");
