@@ -169,6 +169,9 @@ pub struct OfficialArbitraryConfig {
     /// The flow's training schedule as far as the file states it (the
     /// rest from [`FlowConfig::paper`]); a record, not used to sample.
     pub schedule: Schedule,
+    /// The keys that change the model's output which the file does not
+    /// give, with the defaults taken ([`mfm_fm::official::assumed_defaults`]).
+    pub assumed: Vec<String>,
 }
 
 impl OfficialArbitraryConfig {
@@ -234,6 +237,7 @@ impl OfficialArbitraryConfig {
             model,
             ode,
             schedule: schedule_of(&doc),
+            assumed: mfm_fm::official::assumed_defaults(&doc),
         };
         cfg.check()?;
         Ok(cfg)
@@ -474,6 +478,9 @@ pub struct ArbitraryImportRecord {
     /// Top-level entries of the checkpoint that were not read (Lightning's
     /// optimizer and loop states...).
     pub ignored_entries: Vec<String>,
+    /// Keys the configuration leaves out, with the defaults taken.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub assumed: Vec<String>,
 }
 
 /// The files an imported arbitrary-source run holds.
@@ -662,6 +669,7 @@ pub fn import_official_arbitrary(
         flow_parameters: flow_net.num_parameters(),
         predictor_parameters: predictor_net.num_parameters(),
         ignored_entries: ckpt.ignored_entries().to_vec(),
+        assumed: config.assumed.clone(),
     };
     let identity = template.map(|(m, _)| mfm_data::dataset::mesh_identity(m));
     let vertices = template.map_or(0, |(m, _)| m.num_vertices());

@@ -331,19 +331,19 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         }
         return crate::arbitrary::sample(&a);
     }
+    if a.run
+        .join(mfm_arbitrary::predictor::PREDICTOR_SPEC)
+        .is_file()
+    {
+        bail!(
+            "--run {}: is an eigenvector predictor run (mfm train --mode predictor), which \
+             generates nothing itself: train an arbitrary-source flow with it \
+             (mfm train --mode arbitrary --predictor {}) and sample that run with --source",
+            a.run.display(),
+            a.run.display()
+        );
+    }
     let Some(mesh_arg) = a.mesh.as_deref() else {
-        if a.run
-            .join(mfm_arbitrary::predictor::PREDICTOR_SPEC)
-            .is_file()
-        {
-            bail!(
-                "--run {}: is an eigenvector predictor run (mfm train --mode predictor), which \
-                 generates nothing itself: train an arbitrary-source flow with it \
-                 (mfm train --mode arbitrary --predictor {}) and sample that run with --source",
-                a.run.display(),
-                a.run.display()
-            );
-        }
         bail!(
             "--source is for arbitrary-source runs (mfm train --mode arbitrary); {} is a flow on one mesh: pass --mesh",
             a.run.display()

@@ -123,6 +123,12 @@ pub fn import(a: ImportArgs) -> Result<()> {
             record.ignored_entries.join(", ")
         );
     }
+    for key in &record.assumed {
+        eprintln!(
+            "note: {} leaves out {key}; make sure that is what the model was trained with",
+            a.config.display()
+        );
+    }
     println!(
         "sample it with: mfm sample --run {} --mesh {} --out SAMPLES",
         a.out.display(),
@@ -188,6 +194,12 @@ fn import_arbitrary(a: ImportArgs) -> Result<()> {
         println!(
             "not read (training state): {}",
             record.ignored_entries.join(", ")
+        );
+    }
+    for key in &record.assumed {
+        eprintln!(
+            "note: {} leaves out {key}; make sure that is what the model was trained with",
+            a.config.display()
         );
     }
     println!(

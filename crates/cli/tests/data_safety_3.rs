@@ -622,3 +622,33 @@ fn a_killed_sample_leaves_nothing_that_stops_the_rerun() {
     assert!(d.join("s/samples.npy").is_file());
     assert!(!temporary());
 }
+
+#[test]
+fn info_and_the_commands_that_compute_agree_on_a_mesh_out_of_range() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    for (name, scale) in [("tiny.off", "1e-320"), ("huge.off", "1e300")] {
+        fs::write(
+            d.join(name),
+            format!("OFF\n3 1 0\n0 0 0\n{scale} 0 0\n0 {scale} 0\n3 0 1 2\n"),
+        )
+        .unwrap();
+        let o = ok(d, &["info", name]);
+        let report = common::out(&o);
+        assert!(
+            report.contains("too small or too large"),
+            "{name}: {report}"
+        );
+        let e = refused(
+            d,
+            &["noise", name, "--out", "n.npy"],
+            "too small or too large",
+        );
+        assert!(!e.contains("NaN"), "{e}");
+        refused(
+            d,
+            &["remesh", name, "--subdivide", "1", "--out", "r.ply"],
+            "too small or too large",
+        );
+    }
+}

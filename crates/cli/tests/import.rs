@@ -482,6 +482,22 @@ fn the_authors_arbitrary_source_pairs_train_the_arbitrary_source_model() {
         ]
         .concat(),
     );
+    // a predictor run generates nothing, with --mesh or --source
+    for flag in ["--mesh", "--source"] {
+        refused(
+            d,
+            &[
+                "sample",
+                "--run",
+                "pred",
+                flag,
+                "data/holdout/mesh.ply",
+                "--out",
+                "p",
+            ],
+            "is an eigenvector predictor run",
+        );
+    }
     // the template (the first pair's source) as a source gives a target
     ok(
         d,

@@ -186,6 +186,50 @@ pub struct OfficialConfig {
     pub center: bool,
     /// `ode_solver:` (default: 20 midpoint steps, the paper's).
     pub ode: Option<OfficialOde>,
+    /// The keys that change the model's output which the file does not
+    /// give, each with the default taken ([`assumed_defaults`]).
+    pub assumed: Vec<String>,
+}
+
+/// The keys of an official configuration `doc` that change what the
+/// imported model generates and that the file leaves out, each with the
+/// default mfm (as the official code) takes: "model.x0_dist.screening_term
+/// (1; the authors' configurations give 100)". A user told nothing would
+/// get a different model than the one they trained.
+pub fn assumed_defaults(doc: &serde_norway::Value) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut say = |key: &str, value: &str| out.push(format!("{key} (taken as {value})"));
+    match doc.get("model").and_then(|m| m.get("x0_dist")) {
+        None => say("model.x0_dist", "an unscreened Poisson solve of sigma 1"),
+        Some(x0) => {
+            if x0.get("sigma").is_none() {
+                say("model.x0_dist.sigma", "1");
+            }
+            let screened = x0
+                .get("screened_solver_for_x0")
+                .and_then(serde_norway::Value::as_bool)
+                .unwrap_or(false);
+            if screened && x0.get("screening_term").is_none() {
+                say(
+                    "model.x0_dist.screening_term",
+                    "1; the authors' configurations give 100",
+                );
+            }
+        }
+    }
+    if doc
+        .get("train")
+        .and_then(|t| t.get("center_target_data"))
+        .is_none()
+    {
+        say("train.center_target_data", "True");
+    }
+    match doc.get("ode_solver") {
+        None => say("ode_solver", "20 midpoint steps"),
+        Some(ode) if ode.get("method").is_none() => say("ode_solver.method", "midpoint"),
+        Some(_) => {}
+    }
+    out
 }
 
 /// The error for what an official configuration file `path` holds:
@@ -268,6 +312,7 @@ impl OfficialConfig {
             model,
             center,
             ode,
+            assumed: assumed_defaults(&doc),
         };
         cfg.check()?;
         Ok(cfg)
@@ -492,6 +537,9 @@ pub fn x0_noise(path: &Path, x0: Option<&OfficialX0>) -> Result<(NoiseKind, f64)
     Ok((NoiseKind::Matern { tau }, x0.sigma))
 }
 
+/// The most ODE steps an imported configuration may ask for.
+pub const MAX_ODE_STEPS: usize = 10_000;
+
 /// The steps and method of an official `ode_solver` section (`None`: 20
 /// midpoint steps, the paper's); `step_size` must be `1 / n` for a whole
 /// `n`.
@@ -515,6 +563,16 @@ pub fn ode_steps(path: &Path, ode: Option<&OfficialOde>) -> Result<(usize, OdeMe
     };
     let steps = 1.0 / ode.step_size;
     let rounded = steps.round();
+    if rounded > MAX_ODE_STEPS as f64 {
+        return Err(config_error(
+            path,
+            format!(
+                "ode_solver.step_size {}: {rounded} steps per sample; at most {MAX_ODE_STEPS} are \
+                 taken (the paper integrates with 20)",
+                ode.step_size
+            ),
+        ));
+    }
     if !(ode.step_size > 0.0 && rounded >= 1.0 && (steps - rounded).abs() < 1e-6 * rounded) {
         return Err(config_error(
             path,
@@ -547,6 +605,10 @@ pub struct ImportRecord {
     /// Top-level entries of the checkpoint that were not read (a
     /// Lightning checkpoint's optimizer and loop states...).
     pub ignored_entries: Vec<String>,
+    /// Keys the configuration leaves out, with the defaults taken
+    /// ([`assumed_defaults`]).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub assumed: Vec<String>,
 }
 
 /// The tensors of an official checkpoint file, read without Python: the
@@ -710,6 +772,7 @@ pub fn import_official(
         global_step: ckpt.global_step(),
         parameters: net.num_parameters(),
         ignored_entries: ckpt.ignored_entries().to_vec(),
+        assumed: config.assumed.clone(),
     };
     let undo = mfm_files::Undo::empty_folder(out)?;
     net.save(out.join(WEIGHTS_FILE))?;
@@ -819,6 +882,38 @@ ode_solver:
         let f = c.flow_spec(&mesh).unwrap();
         assert_eq!(f.noise_scale, 3.0);
         assert!(f.frame.is_identity() && f.positions && f.centered);
+    }
+
+    #[test]
+    fn keys_left_out_are_named_with_the_defaults_taken() {
+        assert!(parse(BUNNY).unwrap().assumed.is_empty());
+        let sparse = BUNNY
+            .replace("    screening_term: 100.0\n", "")
+            .replace("    sigma: 3.0\n", "")
+            .replace("  center_target_data: True\n", "")
+            .replace("ode_solver:\n  method: 'midpoint'\n  step_size: 0.05\n", "");
+        let c = parse(&sparse).unwrap();
+        let keys: Vec<&str> = c
+            .assumed
+            .iter()
+            .map(|a| a.split(' ').next().unwrap())
+            .collect();
+        assert_eq!(
+            keys,
+            [
+                "model.x0_dist.sigma",
+                "model.x0_dist.screening_term",
+                "train.center_target_data",
+                "ode_solver"
+            ]
+        );
+        assert!(c.assumed[1].contains("taken as 1") && c.assumed[1].contains("100"));
+        // a step size that asks for 10^12 steps is refused, not run
+        let e = parse(&BUNNY.replace("step_size: 0.05", "step_size: 1.0e-12"))
+            .and_then(|c| c.run_config())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("at most 10000"), "{e}");
     }
 
     #[test]

@@ -145,6 +145,17 @@ pub enum MeshProblem {
         /// Their endpoints `[a, b]`, `a < b`.
         first: Vec<[u32; 2]>,
     },
+    /// Faces of a sound shape whose size is out of `f64`'s range for the
+    /// operators: coordinates so small (about `1e-160`) or so large
+    /// (`1e150`) that squared edge lengths underflow or overflow
+    /// ([`crate::operators::degenerate_for_operators`]). The only problem
+    /// that depends on the mesh's scale.
+    OutOfRange {
+        /// Number of such faces.
+        count: usize,
+        /// Their indices, lowest first.
+        first: Vec<usize>,
+    },
     /// Faces with the same vertex set as an earlier face.
     DuplicateFaces {
         /// Number of faces that repeat an earlier one (what
@@ -167,6 +178,13 @@ impl fmt::Display for MeshProblem {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let edge = |e: &[u32; 2]| format!("edge {}-{}", e[0], e[1]);
         match self {
+            Self::OutOfRange { count, first } => write!(
+                f,
+                "{} too small or too large for f64 arithmetic (squared edge lengths underflow or \
+                 overflow; rescale the mesh), e.g. {}",
+                plural(*count, "face", "faces"),
+                list(first, |i| format!("face {i}"))
+            ),
             Self::DegenerateFaces { count, first } => write!(
                 f,
                 "{} (zero area up to round-off), e.g. {}",
@@ -306,6 +324,7 @@ impl MeshReport {
         let mut min_angle = f64::INFINITY;
         let mut max_angle = 0.0f64;
         let mut degenerate = Vec::new();
+        let mut out_of_range = Vec::new();
         for f in 0..mesh.num_faces() {
             let p = mesh.face_positions(f);
             area += triangle_area(&p);
@@ -317,6 +336,8 @@ impl MeshReport {
             }
             if is_degenerate(&p, diagonal) {
                 degenerate.push(f);
+            } else if crate::operators::degenerate_for_operators(&p) {
+                out_of_range.push(f);
             }
         }
 
@@ -325,6 +346,12 @@ impl MeshReport {
             problems.push(MeshProblem::DegenerateFaces {
                 count: degenerate.len(),
                 first: first(&degenerate),
+            });
+        }
+        if !out_of_range.is_empty() {
+            problems.push(MeshProblem::OutOfRange {
+                count: out_of_range.len(),
+                first: first(&out_of_range),
             });
         }
         let unreferenced = topo.unreferenced_vertices();

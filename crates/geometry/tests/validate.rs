@@ -178,7 +178,16 @@ fn angles_and_degeneracy_thresholds() {
             [scale, 0.0, 0.0],
             [0.5 * scale, 1e-8 * scale, 0.0],
         ]));
-        assert!(r.is_valid(), "{scale}: {r}");
+        // (at 1e-200 and 1e200 its squared edge lengths leave f64's range:
+        // sound in shape, unusable by the operators, and said so)
+        if (1e-100..1e100).contains(&scale) {
+            assert!(r.is_valid(), "{scale}: {r}");
+        } else {
+            assert!(
+                matches!(r.problems[..], [MeshProblem::OutOfRange { count: 1, .. }]),
+                "{scale}: {r}"
+            );
+        }
         assert!(r.min_angle_degrees > 1e-7 && r.min_angle_degrees < 2e-6);
     }
     // a well-shaped face 1e-8 the size of the mesh has area 1e-16 of it: degenerate
@@ -373,7 +382,12 @@ proptest! {
         let got: Vec<MeshProblem> = r
             .problems
             .iter()
-            .filter(|p| !matches!(p, MeshProblem::DegenerateFaces { .. }))
+            .filter(|p| {
+                !matches!(
+                    p,
+                    MeshProblem::DegenerateFaces { .. } | MeshProblem::OutOfRange { .. }
+                )
+            })
             .cloned()
             .collect();
         prop_assert_eq!(got, want);
@@ -384,14 +398,23 @@ proptest! {
         prop_assert_eq!(validate::validate(&mesh).is_ok(), r.is_valid());
     }
 
-    /// Scaling by a power of two changes no problem and no count, even far
-    /// beyond the range where squared lengths underflow or overflow.
+    /// Scaling by a power of two changes no problem (but whether faces are
+    /// within f64's range for the operators) and no count, even far beyond
+    /// the range where squared lengths underflow or overflow.
     #[test]
     fn report_is_scale_invariant(mesh in tame_soup(), e in -600i32..600) {
         let scaled = mesh.transformed(2f64.powi(e), [0.0; 3]);
         let a = MeshReport::new(&mesh);
         let b = MeshReport::new(&scaled);
-        prop_assert_eq!(a.problems, b.problems);
+        // every problem but the range of f64 (the one that depends on scale)
+        let shape = |r: &MeshReport| -> Vec<MeshProblem> {
+            r.problems
+                .iter()
+                .filter(|p| !matches!(p, MeshProblem::OutOfRange { .. }))
+                .cloned()
+                .collect()
+        };
+        prop_assert_eq!(shape(&a), shape(&b));
         prop_assert_eq!((a.num_edges, a.components, a.genus), (b.num_edges, b.components, b.genus));
         prop_assert!((a.min_angle_degrees - b.min_angle_degrees).abs() < 1e-9);
         prop_assert!((a.max_angle_degrees - b.max_angle_degrees).abs() < 1e-9);

@@ -291,6 +291,9 @@ fn parse(
     format: MeshFormat,
     base: Option<&Path>,
 ) -> Result<(TriMesh, VertexScalars), ReadErrorKind> {
+    // a UTF-8 byte-order mark some editors put before a text header
+    // (`\u{feff}OFF`) is not part of it
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
     let parsed = match format {
         MeshFormat::Obj => obj::parse(bytes)?,
         MeshFormat::Off => off::parse(bytes)?,

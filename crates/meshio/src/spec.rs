@@ -80,6 +80,17 @@ pub enum MeshSpecError {
         #[source]
         source: ProceduralError,
     },
+    /// The mesh's faces are too small or too large for the operators'
+    /// `f64` arithmetic.
+    #[error(
+        "{spec}: {problem}; no operator can be built on it (`mfm info {spec}` lists its problems)"
+    )]
+    OutOfRange {
+        /// The name as given.
+        spec: String,
+        /// The problem as [`MeshReport`] states it.
+        problem: MeshProblem,
+    },
     /// The mesh has duplicate faces, which every operator would count twice.
     #[error(
         "{spec}: {problem}; every operator would count their area twice: remove them first \
@@ -202,10 +213,11 @@ pub fn load_mesh_spec_checked(spec: &str) -> Result<CheckedMesh, MeshSpecError> 
 }
 
 /// The policy of [`load_mesh_spec_checked`] on a mesh already loaded: the
-/// warnings, or the duplicate faces as an error.
+/// warnings, or the duplicate faces or faces out of `f64`'s range as an
+/// error.
 ///
 /// # Errors
-/// [`MeshSpecError::DuplicateFaces`].
+/// [`MeshSpecError::DuplicateFaces`], [`MeshSpecError::OutOfRange`].
 pub fn check_mesh(spec: &str, mesh: &TriMesh) -> Result<Vec<MeshProblem>, MeshSpecError> {
     let report = MeshReport::new(mesh);
     if let Some(p) = report
@@ -214,6 +226,16 @@ pub fn check_mesh(spec: &str, mesh: &TriMesh) -> Result<Vec<MeshProblem>, MeshSp
         .find(|p| matches!(p, MeshProblem::DuplicateFaces { .. }))
     {
         return Err(MeshSpecError::DuplicateFaces {
+            spec: spec.to_owned(),
+            problem: p.clone(),
+        });
+    }
+    if let Some(p) = report
+        .problems
+        .iter()
+        .find(|p| matches!(p, MeshProblem::OutOfRange { .. }))
+    {
+        return Err(MeshSpecError::OutOfRange {
             spec: spec.to_owned(),
             problem: p.clone(),
         });

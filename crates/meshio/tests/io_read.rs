@@ -469,6 +469,26 @@ fn obj_syntax_error(text: &[u8]) -> (usize, String) {
 }
 
 #[test]
+fn a_byte_order_mark_before_a_text_header_is_skipped() {
+    let bom = "\u{feff}";
+    let off = format!("{bom}OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+    let obj = format!("{bom}v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    let ply = format!(
+        "{bom}ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+         property float z\nelement face 1\nproperty list uchar int vertex_indices\n\
+         end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"
+    );
+    for (text, format) in [
+        (off, MeshFormat::Off),
+        (obj, MeshFormat::Obj),
+        (ply, MeshFormat::Ply),
+    ] {
+        let m = parse_ok(text.as_bytes(), format);
+        assert_eq!(m.faces(), &[[0, 1, 2]], "{format:?}");
+    }
+}
+
+#[test]
 fn obj_errors_name_the_line_and_what_is_wrong() {
     let tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
     // a coordinate that is not a number: the vertex and the statement

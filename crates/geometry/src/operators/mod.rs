@@ -558,6 +558,17 @@ fn data_from_squared_lengths(sq: [f64; 3]) -> (FaceData, f64) {
     (data, area)
 }
 
+/// Whether the operators treat the face with corners `p` as degenerate
+/// (zero data): its area is not resolved in `f64` from its squared edge
+/// lengths (collinear up to round-off, or coordinates so small the squares
+/// underflow), or not finite. [`crate::validate::MeshReport`] reports the
+/// faces this holds for that are not degenerate in shape as
+/// [`crate::validate::MeshProblem::OutOfRange`], so that a report names
+/// every face the operators cannot use.
+pub fn degenerate_for_operators(p: &[[f64; 3]; 3]) -> bool {
+    area_from_squared_lengths(squared_edge_lengths(p)).1
+}
+
 /// The area of face `t` (finite) and whether it is degenerate.
 #[inline]
 fn face_area(pos: &[[f64; 3]], t: &[u32; 3]) -> (f64, bool) {
