@@ -161,6 +161,9 @@ pub(crate) struct Optimization {
     step: u64,
     elapsed: f64,
     last_loss: Option<f64>,
+    /// The sums of the log row in progress (kept in checkpoints, so that a
+    /// resumed run writes the rows an uninterrupted one does).
+    acc: LogAccumulator,
     skipped: Vec<String>,
 }
 
@@ -198,18 +201,23 @@ impl Optimization {
             .map(|(dir, e)| format!("{}: {e}", dir.display()))
             .collect();
         let log = run_dir.join(LOG_FILE);
-        let (step, elapsed, last_loss) = match newest {
+        let (step, elapsed, last_loss, acc) = match newest {
             Some((info, state)) => {
                 refuse_spec_edits(run_dir, &info.dir, spec_file, state.step)?;
                 network.load_weights(info.dir.join(WEIGHTS_FILE))?;
                 adam.load(&info.dir.join(OPTIMIZER_FILE), state.step)?;
                 truncate_log(&log, state.step)?;
-                (state.step, state.elapsed_seconds, state.last_loss)
+                (
+                    state.step,
+                    state.elapsed_seconds,
+                    state.last_loss,
+                    state.log,
+                )
             }
             None => {
                 checkpoint::refuse_restart_over_final_model(run_dir)?;
                 checkpoint::write_atomic(&log, format!("{LOG_HEADER}\n").as_bytes())?;
-                (0, 0.0, None)
+                (0, 0.0, None, LogAccumulator::default())
             }
         };
         Ok(Self {
@@ -221,6 +229,7 @@ impl Optimization {
             step,
             elapsed,
             last_loss,
+            acc,
             skipped,
         })
     }
@@ -233,7 +242,7 @@ impl Optimization {
             rng: RNG.into(),
             elapsed_seconds: self.elapsed,
             last_loss: self.last_loss,
-            log: LogAccumulator::default(),
+            log: self.acc,
             files: BTreeMap::new(),
         };
         let (net, adam) = (&self.net, &self.adam);
@@ -281,7 +290,6 @@ impl Optimization {
             .map_err(|e| FmError::io(&log_path, e))?;
         let session = Instant::now();
         let base = self.elapsed;
-        let mut acc = LogAccumulator::default();
         let mut stopped = false;
         let mut last_checkpoint = None;
         while self.step < total {
@@ -306,10 +314,11 @@ impl Optimization {
             self.step += 1;
             self.last_loss = Some(loss);
             self.elapsed = base + session.elapsed().as_secs_f64();
-            acc.loss_sum += loss;
-            acc.grad_norm_sum += grad_norm;
-            acc.count += 1;
+            self.acc.loss_sum += loss;
+            self.acc.grad_norm_sum += grad_norm;
+            self.acc.count += 1;
             if self.step % LOG_EVERY == 0 || self.step == total {
+                let acc = std::mem::take(&mut self.acc);
                 let n = acc.count.max(1) as f64;
                 let row = format!(
                     "{},{},{},{},{:.3}\n",
@@ -322,7 +331,6 @@ impl Optimization {
                 log.write_all(row.as_bytes())
                     .and_then(|()| log.flush())
                     .map_err(|e| FmError::io(&log_path, e))?;
-                acc = LogAccumulator::default();
             }
             bar.set_position(self.step);
             bar.set_message(format!("loss {loss:.4e} lr {lr:.1e}"));

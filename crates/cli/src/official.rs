@@ -68,8 +68,7 @@ pub struct ExportArgs {
 
 /// Runs `mfm import`: routes on the configuration's `model.type`.
 pub fn import(a: ImportArgs) -> Result<()> {
-    let kind = official_model_type(&a.config)
-        .with_context(|| format!("reading --config {}", a.config.display()))?;
+    let kind = official_model_type(&a.config).context("reading --config")?;
     if kind == ARBITRARY_MODEL_TYPE {
         return import_arbitrary(a);
     }

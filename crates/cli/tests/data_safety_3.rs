@@ -652,3 +652,42 @@ fn info_and_the_commands_that_compute_agree_on_a_mesh_out_of_range() {
         );
     }
 }
+
+#[test]
+fn a_file_is_named_once_in_an_error() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    let once = |e: &str, name: &str| {
+        assert_eq!(e.matches(name).count(), 1, "{name} in: {e}");
+    };
+    let e = refused(
+        d,
+        &["dataset", "import", "gone.pt", "--out", "x"],
+        "gone.pt",
+    );
+    once(&e, "gone.pt");
+    fs::write(d.join("garbage.pt"), "not a zip").unwrap();
+    let e = refused(
+        d,
+        &["dataset", "import", "garbage.pt", "--out", "x"],
+        "garbage.pt",
+    );
+    once(&e, "garbage.pt");
+    #[cfg(feature = "network")]
+    {
+        let e = refused(
+            d,
+            &[
+                "import",
+                "--checkpoint",
+                "gone.ckpt",
+                "--config",
+                "gone.yaml",
+                "--out",
+                "r",
+            ],
+            "gone.yaml",
+        );
+        once(&e, "gone.yaml");
+    }
+}

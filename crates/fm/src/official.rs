@@ -631,7 +631,7 @@ impl OfficialCheckpoint {
     /// [`FmError::Files`] naming the file: unreadable, not a `torch.save`
     /// archive, objects other than tensors and containers, no state dict.
     pub fn open(path: &Path) -> Result<Self> {
-        let fail = |e: mfm_torchfile::TorchFileError| FmError::format(path, e.to_string());
+        let fail = |e: mfm_torchfile::TorchFileError| FmError::format(path, e.without_path());
         let mut ckpt = Checkpoint::open(path).map_err(fail)?;
         let root = ckpt.root().clone();
         let global_step = match root.get("global_step") {

@@ -43,5 +43,18 @@ pub enum TorchFileError {
     },
 }
 
+impl TorchFileError {
+    /// The message without the file's name, for a caller whose own error
+    /// names the file (so that it is not printed twice).
+    pub fn without_path(&self) -> String {
+        match self {
+            Self::Io { source, .. } => source.to_string(),
+            Self::Archive { message, .. } => message.clone(),
+            Self::Pickle { .. } => self.to_string(),
+            Self::Entry { entry, message, .. } => format!("entry {entry}: {message}"),
+        }
+    }
+}
+
 /// Result of this crate.
 pub type Result<T> = std::result::Result<T, TorchFileError>;

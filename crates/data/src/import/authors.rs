@@ -44,7 +44,7 @@ pub struct AuthorsDataset {
 /// built from `src_verts` and `faces`.
 pub fn read_authors_dataset(path: &Path) -> Result<AuthorsDataset> {
     let fail = |m: String| DataError::format(path, m);
-    let mut file = Checkpoint::open(path).map_err(|e| fail(e.to_string()))?;
+    let mut file = Checkpoint::open(path).map_err(|e| fail(e.without_path()))?;
     let root = file.root().clone();
     if !matches!(root, Value::Dict(_)) {
         return Err(fail(format!(
@@ -62,7 +62,7 @@ pub fn read_authors_dataset(path: &Path) -> Result<AuthorsDataset> {
                     t.storage_numel as u128,
                     3 * t.dtype.size() as u128 + 4,
                 )?;
-                file.tensor(key, t).map_err(|e| fail(e.to_string()))
+                file.tensor(key, t).map_err(|e| fail(e.without_path()))
             }
             Some(other) => Err(fail(format!(
                 "{key} is a {}, expected a tensor",
