@@ -131,12 +131,12 @@ pub fn sample(a: &SampleArgs) -> Result<()> {
     if a.device == DeviceChoice::Cuda {
         bail!("an arbitrary-source run samples on the CPU (drop --device cuda)");
     }
-    let source = a
-        .source
-        .as_deref()
-        .or(a.mesh.as_deref())
-        .unwrap_or_default();
-    let mesh = load_mesh_checked(source)?;
+    let Some(source_spec) = a.source.as_ref().or(a.mesh.as_ref()) else {
+        bail!("give the source shape with --source MESH");
+    };
+    let mesh = load_mesh_checked(source_spec)?;
+    let source_name = source_spec.to_string();
+    let source = source_name.as_str();
     let mut sampler = ArbitrarySampler::load(&a.run)?;
     for w in sampler.source_warnings(&mesh) {
         eprintln!("warning: {source}: {w}; the run generates poses of shapes like its template's");
@@ -150,7 +150,7 @@ pub fn sample(a: &SampleArgs) -> Result<()> {
     let folder = SampleFolder {
         run: &a.run,
         source_name: source,
-        source_file: mesh_path(source),
+        source_file: mesh_path(source_spec),
         out: &a.out,
         count: a.n,
         seed: a.seed,

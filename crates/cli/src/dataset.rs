@@ -1,7 +1,7 @@
 //! `mfm dataset gmm`, `mfm dataset deform` and `mfm dataset pairs`:
 //! training and reference sets written as dataset folders.
 
-use crate::mesh::load_mesh_checked;
+use crate::mesh::{MeshSpec, load_mesh_checked};
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
 use mfm_data::deformations::{self, DeformMeshes};
@@ -91,7 +91,7 @@ pub struct ImportArgs {
     signals: Option<PathBuf>,
     /// The mesh --signals lives on.
     #[arg(long, requires = "signals")]
-    mesh: Option<String>,
+    mesh: Option<crate::mesh::MeshSpec>,
     /// Read this PLY vertex property of every input as a signal channel
     /// instead of the positions (repeatable, in channel order).
     #[arg(long = "property")]
@@ -142,7 +142,7 @@ pub struct PoseArgs {
 impl PoseArgs {
     /// The normalized, coarse and evaluation meshes of the mesh `spec`,
     /// with the pose space on the normalized one.
-    fn meshes_and_space(&self, spec: &str) -> Result<(DeformMeshes, DeformSpace)> {
+    fn meshes_and_space(&self, spec: &MeshSpec) -> Result<(DeformMeshes, DeformSpace)> {
         let input = load_mesh_checked(spec)?;
         let meshes = DeformMeshes::from_mesh(&input, self.coarse_faces)
             .with_context(|| format!("preparing the meshes of {spec}"))?;
@@ -159,7 +159,7 @@ pub struct PairsArgs {
     /// The template mesh (a file or builtin:NAME); default
     /// ../shared/meshes/alien.obj when it exists.
     #[arg(long)]
-    mesh: Option<String>,
+    mesh: Option<crate::mesh::MeshSpec>,
     /// Output folder (must not exist or be empty).
     #[arg(long)]
     out: PathBuf,
@@ -196,7 +196,7 @@ pub struct DeformArgs {
     /// The mesh to deform (a file or builtin:NAME), e.g.
     /// ../shared/meshes/elephant.obj.
     #[arg(long)]
-    mesh: String,
+    mesh: crate::mesh::MeshSpec,
     /// Output folder (must not exist or be empty).
     #[arg(long)]
     out: PathBuf,
@@ -221,11 +221,11 @@ pub struct GmmArgs {
     /// 2562 vertices, with its test mesh whose x < centroid half is refined
     /// twice).
     #[arg(long)]
-    mesh: Option<String>,
+    mesh: Option<crate::mesh::MeshSpec>,
     /// Test mesh for the reference set (default: the training mesh with the
     /// half x < centroid refined twice).
     #[arg(long)]
-    test_mesh: Option<String>,
+    test_mesh: Option<crate::mesh::MeshSpec>,
     /// Training signals.
     #[arg(long, default_value_t = 1000)]
     n: usize,
@@ -296,7 +296,7 @@ fn dataset_pairs(a: PairsArgs) -> Result<()> {
     }
     let spec = match &a.mesh {
         Some(m) => m.clone(),
-        None if Path::new(DEFAULT_PAIRS_MESH).is_file() => DEFAULT_PAIRS_MESH.to_owned(),
+        None if Path::new(DEFAULT_PAIRS_MESH).is_file() => MeshSpec::from(DEFAULT_PAIRS_MESH),
         None => bail!(
             "no --mesh given and the default template {DEFAULT_PAIRS_MESH} is not here; \
              pass --mesh FILE or --mesh builtin:NAME"
@@ -319,7 +319,7 @@ fn dataset_pairs(a: PairsArgs) -> Result<()> {
     PairsExperiment {
         meshes: &meshes,
         space: &space,
-        source: &spec,
+        source: &spec.to_string(),
         train: a.shapes,
         reference: a.reference,
         seed: a.pose.seed,
@@ -350,7 +350,7 @@ fn dataset_deform(a: DeformArgs) -> Result<()> {
     DeformExperiment {
         meshes: &meshes,
         space: &space,
-        source: &a.mesh,
+        source: &a.mesh.to_string(),
         train: a.n,
         reference: a.reference,
         seed: a.pose.seed,
@@ -394,12 +394,12 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
         (Some(spec), None) => {
             let base = with_areas(load_mesh_checked(spec)?, "--mesh", spec)?;
             let m = GmmMeshes::from_base(base, Default::default())?;
-            (m.train, m.test, spec.clone())
+            (m.train, m.test, spec.to_string())
         }
         (Some(spec), Some(test)) => (
             with_areas(load_mesh_checked(spec)?, "--mesh", spec)?,
             with_areas(load_mesh_checked(test)?, "--test-mesh", test)?,
-            spec.clone(),
+            spec.to_string(),
         ),
         (None, Some(_)) => bail!("--test-mesh needs --mesh (the training mesh)"),
     };
@@ -441,7 +441,7 @@ fn dataset_gmm(a: GmmArgs) -> Result<()> {
 fn with_areas(
     mesh: mfm_geometry::TriMesh,
     flag: &str,
-    spec: &str,
+    spec: &MeshSpec,
 ) -> Result<mfm_geometry::TriMesh> {
     let bad = mfm_geometry::operators::degenerate_faces(&mesh);
     if let Some(first) = bad.first() {
@@ -478,7 +478,7 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
     inputs_read.extend(a.reference_mesh.clone());
     inputs_read.extend(
         a.mesh
-            .as_deref()
+            .as_ref()
             .and_then(crate::mesh::mesh_path)
             .map(Path::to_path_buf),
     );
@@ -491,8 +491,10 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
     let mut paired = false;
     let (template, template_name, source): (mfm_geometry::TriMesh, String, Box<dyn SignalFiles>) =
         if let Some(array) = &a.signals {
-            let spec = a.mesh.clone().unwrap_or_default();
-            let mesh = load_mesh_checked(&spec)?;
+            let Some(spec) = a.mesh.as_ref() else {
+                bail!("--signals needs --mesh: the mesh the signals live on");
+            };
+            let mesh = load_mesh_checked(spec)?;
             let rows = NpyRows::open(array, false)?;
             let positions = rows.channels() == 3 && !a.values;
             let rows = NpyRows::open(array, positions)?;
@@ -504,7 +506,7 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
                     mesh.num_vertices()
                 );
             }
-            (mesh, spec, Box::new(rows))
+            (mesh, spec.to_string(), Box::new(rows))
         } else if a.inputs.len() == 1 && is_torch(&a.inputs[0]) {
             let path = &a.inputs[0];
             if !a.properties.is_empty() {
@@ -544,7 +546,7 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
             }
             let template_path = a.template.clone().unwrap_or_else(|| list.files[0].clone());
             let spec = template_path.display().to_string();
-            let template = load_mesh_checked(&spec)?;
+            let template = load_mesh_checked(&MeshSpec::from(template_path.into_os_string()))?;
             let files = MeshFiles {
                 files: list.files,
                 properties: a.properties.clone(),
@@ -554,7 +556,10 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
     let reference = match &a.reference_mesh {
         Some(p) => {
             let spec = p.display().to_string();
-            Some((load_mesh_checked(&spec)?, spec))
+            Some((
+                load_mesh_checked(&MeshSpec::from(p.clone().into_os_string()))?,
+                spec,
+            ))
         }
         None => None,
     };

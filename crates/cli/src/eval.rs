@@ -27,7 +27,7 @@ pub struct EvalArgs {
     space: Option<PathBuf>,
     /// The mesh the samples live on (with --space).
     #[arg(long)]
-    mesh: Option<String>,
+    mesh: Option<crate::mesh::MeshSpec>,
     /// Write the metrics as JSON here.
     #[arg(long)]
     out: Option<PathBuf>,

@@ -79,12 +79,12 @@ pub struct SampleArgs {
     pub(crate) run: PathBuf,
     /// Mesh to generate on: any triangulation of the training surface.
     #[arg(long, required_unless_present = "source", conflicts_with = "source")]
-    pub(crate) mesh: Option<String>,
+    pub(crate) mesh: Option<crate::mesh::MeshSpec>,
     /// Source mesh of an arbitrary-source run (`mfm train --mode
     /// arbitrary`): any mesh of a shape like the template's, of any
     /// triangulation; targets are generated over it.
     #[arg(long)]
-    pub(crate) source: Option<String>,
+    pub(crate) source: Option<crate::mesh::MeshSpec>,
     /// Number of samples (with --x0: the file's count).
     #[arg(long, default_value_t = 16)]
     pub(crate) n: usize,
@@ -343,7 +343,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
             a.run.display()
         );
     }
-    let Some(mesh_arg) = a.mesh.as_deref() else {
+    let Some(mesh_arg) = a.mesh.as_ref() else {
         bail!(
             "--source is for arbitrary-source runs (mfm train --mode arbitrary); {} is a flow on one mesh: pass --mesh",
             a.run.display()

@@ -7,18 +7,23 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use mfm_data::deformations::{Damage, damaged_mesh};
 use mfm_geometry::{MeshReport, TriMesh, operators, subdivide};
-pub use mfm_meshio::spec::spec_path as mesh_path;
-use std::path::PathBuf;
+pub use mfm_meshio::spec::MeshSpec;
+use std::path::{Path, PathBuf};
+
+/// The file a mesh argument names, `None` for a built-in mesh.
+pub fn mesh_path(spec: &MeshSpec) -> Option<&Path> {
+    spec.path()
+}
 
 /// Loads a mesh as it is (`info`, `convert`, `render`, `net bench`).
-pub fn load_mesh(spec: &str) -> Result<TriMesh> {
-    Ok(mfm_meshio::spec::load_mesh_spec(spec)?)
+pub fn load_mesh(spec: &MeshSpec) -> Result<TriMesh> {
+    Ok(spec.load()?)
 }
 
 /// Loads a mesh to compute on: duplicate faces are an error, the other
 /// problems `mfm info` reports are warnings on standard error.
-pub fn load_mesh_checked(spec: &str) -> Result<TriMesh> {
-    let checked = mfm_meshio::spec::load_mesh_spec_checked(spec)?;
+pub fn load_mesh_checked(spec: &MeshSpec) -> Result<TriMesh> {
+    let checked = spec.load_checked()?;
     for p in &checked.warnings {
         eprintln!("warning: {spec}: {p} (`mfm info {spec}` shows the full report)");
     }
@@ -29,7 +34,7 @@ pub fn load_mesh_checked(spec: &str) -> Result<TriMesh> {
 #[derive(Args)]
 pub struct InfoArgs {
     /// Mesh file or builtin:NAME.
-    mesh: String,
+    mesh: crate::mesh::MeshSpec,
     /// Print the report as JSON.
     #[arg(long)]
     json: bool,
@@ -52,7 +57,7 @@ impl InfoArgs {
 #[derive(Args)]
 pub struct OperatorsArgs {
     /// Mesh file or builtin:NAME.
-    mesh: String,
+    mesh: crate::mesh::MeshSpec,
     /// Output folder (created if missing).
     #[arg(long)]
     out: PathBuf,
@@ -62,7 +67,8 @@ impl OperatorsArgs {
     /// Writes the folder ([`mfm_meshio::export::write_operator_folder`]).
     pub fn run(self) -> Result<()> {
         let mesh = load_mesh_checked(&self.mesh)?;
-        let s = mfm_meshio::export::write_operator_folder(&self.mesh, &mesh, &self.out)?;
+        let s =
+            mfm_meshio::export::write_operator_folder(&self.mesh.to_string(), &mesh, &self.out)?;
         println!(
             "wrote L.mtx ({} nnz), G.mtx ({} nnz), mass.npy, face_areas.npy, summary.json to {}; Gamma = {:.6e}",
             s.laplacian_nonzeros,
@@ -78,7 +84,7 @@ impl OperatorsArgs {
 #[derive(Args)]
 pub struct ConvertArgs {
     /// Mesh file or builtin:NAME.
-    mesh: String,
+    mesh: crate::mesh::MeshSpec,
     /// Output file, .obj or .ply.
     out: PathBuf,
 }
@@ -121,7 +127,7 @@ pub enum Quantity {
 #[derive(Args)]
 pub struct RenderArgs {
     /// Mesh file or builtin:NAME.
-    mesh: String,
+    mesh: crate::mesh::MeshSpec,
     /// Output PNG.
     #[arg(long)]
     out: PathBuf,
@@ -198,7 +204,7 @@ impl RenderArgs {
 #[derive(Args)]
 pub struct RemeshArgs {
     /// Mesh file or builtin:NAME.
-    mesh: String,
+    mesh: crate::mesh::MeshSpec,
     /// Output mesh (.ply or .obj).
     #[arg(long)]
     out: PathBuf,

@@ -32,7 +32,7 @@ pub enum NetCommand {
 #[derive(Args)]
 pub struct BenchArgs {
     /// Mesh file or builtin:NAME.
-    mesh: String,
+    mesh: crate::mesh::MeshSpec,
     /// Preset: paper, medium or small.
     #[arg(long, default_value = "small")]
     preset: String,

@@ -36,7 +36,7 @@ pub struct ImportArgs {
     /// Required for a single-source model; optional for an arbitrary-source
     /// one (sources unlike it are then reported).
     #[arg(long)]
-    mesh: Option<String>,
+    mesh: Option<crate::mesh::MeshSpec>,
     /// Arbitrary-source models only: the eigenvector predictor's own
     /// checkpoint (e.g. ckpts/smpl_eigenvecs_predictor.ckpt), checked to
     /// hold the same weights as the predictor inside --checkpoint.

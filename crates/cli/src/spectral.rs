@@ -19,7 +19,7 @@ use std::time::Instant;
 #[derive(Args)]
 pub struct EigsArgs {
     /// Mesh file or builtin:NAME.
-    mesh: String,
+    mesh: crate::mesh::MeshSpec,
     /// Number of eigenpairs.
     #[arg(long, default_value_t = 64)]
     k: usize,
@@ -40,7 +40,7 @@ impl EigsArgs {
         if k > n {
             bail!("{spec}: --k {k} exceeds the vertex count {n}");
         }
-        let s = mfm_meshio::export::write_eigen_folder(spec, &mesh, k, &self.out)?;
+        let s = mfm_meshio::export::write_eigen_folder(&spec.to_string(), &mesh, k, &self.out)?;
         println!(
             "{k} eigenpairs of {spec} ({n} vertices) in {:.2} s ({}); lambda in [{:.4e}, {:.4e}]; wrote {}",
             s.seconds,
@@ -118,7 +118,7 @@ fn progress(total: u64, what: &str) -> ProgressBar {
 #[derive(Args)]
 pub struct NoiseArgs {
     /// Mesh file or builtin:NAME.
-    mesh: String,
+    mesh: crate::mesh::MeshSpec,
     #[command(flatten)]
     kind: KindArgs,
     /// Number of samples.
@@ -173,8 +173,9 @@ impl NoiseArgs {
             .with_context(|| format!("{spec}: cannot set up {kind} noise"))?;
         let setup = start.elapsed().as_secs_f64();
         let bar = progress(samples as u64, "sampling");
+        let name = spec.to_string();
         let files = stream::NoiseFiles {
-            mesh: spec,
+            mesh: &name,
             npy: out,
             json: &json,
             samples,
@@ -217,7 +218,7 @@ pub struct SpectrumArgs {
     /// Mesh files or builtin:NAME (several triangulations of one surface
     /// to compare them).
     #[arg(required = true)]
-    meshes: Vec<String>,
+    meshes: Vec<crate::mesh::MeshSpec>,
     #[command(flatten)]
     kind: KindArgs,
     /// Samples per mesh.
@@ -312,8 +313,9 @@ impl SpectrumArgs {
             let ops = Operators::new(&mesh).with_context(setup)?;
             let sampler = NoiseSampler::from_operators(&ops.laplacian, &ops.mass, kind)
                 .with_context(setup)?;
-            let bar = progress(args.samples as u64, spec);
-            let (m, kept) = MeshSpectrum::measure(spec, &ops, &sampler, &request, |done| {
+            let name = spec.to_string();
+            let bar = progress(args.samples as u64, &name);
+            let (m, kept) = MeshSpectrum::measure(&name, &ops, &sampler, &request, |done| {
                 bar.set_position(done as u64)
             })
             .with_context(|| format!("{spec}: spectrum"))?;
@@ -321,7 +323,7 @@ impl SpectrumArgs {
             println!("{}", m.summary());
             for (slot, i) in histograms.iter_mut().zip(&coefficients) {
                 match kept.iter().find(|(j, _)| j == i) {
-                    Some((_, c)) => slot.push((spec.clone(), c.clone())),
+                    Some((_, c)) => slot.push((name.clone(), c.clone())),
                     None => eprintln!(
                         "warning: {spec}: c_{i} is not plotted for this mesh: it has only {} \
                          frequencies",
@@ -331,7 +333,7 @@ impl SpectrumArgs {
             }
             let r = &m.report;
             series.push(VarianceSeries::new(
-                spec.clone(),
+                name.clone(),
                 &r.eigenvalues,
                 &r.variance,
                 r.theory.as_deref(),

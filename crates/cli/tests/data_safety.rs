@@ -292,9 +292,18 @@ property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_he
         "invalid parameter c: expected at least 1e-10",
     );
     ok(d, &["noise", "ico.ply", "--tau", "0", "--out", "t0.npy"]);
-    let o = ok(d, &["noise", "ico.ply", "--tau", "1e300", "--out", "t.npy"]);
+    let o = ok(d, &["noise", "ico.ply", "--tau", "1e10", "--out", "t.npy"]);
     let line = String::from_utf8_lossy(&o.stdout).into_owned();
-    assert!(line.contains("matern:1e300") && line.len() < 400, "{line}");
+    assert!(
+        line.contains("matern:10000000000") && line.len() < 400,
+        "{line}"
+    );
+    // beyond it the noise vanishes (1e300: all zeros, every sample alike)
+    refused(
+        d,
+        &["noise", "ico.ply", "--tau", "1e300", "--out", "t300.npy"],
+        "in [0, 1e10]",
+    );
     // npy files: truncated and wrong shapes name the file
     let bytes = fs::read(d.join("t.npy")).unwrap();
     fs::write(d.join("trunc.npy"), &bytes[..bytes.len() - 3]).unwrap();

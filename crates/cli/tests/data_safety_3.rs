@@ -691,3 +691,48 @@ fn a_file_is_named_once_in_an_error() {
         once(&e, "gone.yaml");
     }
 }
+
+#[test]
+#[cfg(unix)]
+fn mesh_files_may_have_names_that_are_not_utf8() {
+    use std::os::unix::ffi::OsStringExt;
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    let name = std::ffi::OsString::from_vec(b"caf\xe9.off".to_vec());
+    fs::write(
+        d.join(&name),
+        "OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n",
+    )
+    .unwrap();
+    let run = |args: &[&std::ffi::OsStr]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_mfm"))
+            .current_dir(d)
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    let o = run(&["info".as_ref(), name.as_os_str()]);
+    assert!(o.status.success(), "{}", common::err(&o));
+    assert!(
+        common::out(&o).contains("vertices        4"),
+        "{}",
+        common::out(&o)
+    );
+    let o = run(&[
+        "noise".as_ref(),
+        name.as_os_str(),
+        "--out".as_ref(),
+        "n.npy".as_ref(),
+    ]);
+    assert!(o.status.success(), "{}", common::err(&o));
+    assert!(d.join("n.npy").is_file());
+    // named in messages with a replacement character
+    let missing = std::ffi::OsString::from_vec(b"gon\xe9.off".to_vec());
+    let o = run(&["info".as_ref(), missing.as_os_str()]);
+    assert!(!o.status.success());
+    assert!(
+        common::err(&o).contains("gon\u{fffd}.off"),
+        "{}",
+        common::err(&o)
+    );
+}

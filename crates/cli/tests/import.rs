@@ -514,6 +514,21 @@ fn the_authors_arbitrary_source_pairs_train_the_arbitrary_source_model() {
         ],
     );
     assert!(d.join("targets/samples.npy").is_file());
+    // a source beyond f64's range for the operators is refused by name,
+    // not measured as "area NaN differs by NaN%"
+    std::fs::write(
+        d.join("huge.off"),
+        "OFF\n3 1 0\n0 0 0\n1e300 0 0\n0 1e300 0\n3 0 1 2\n",
+    )
+    .unwrap();
+    let e = refused(
+        d,
+        &[
+            "sample", "--run", "arb", "--source", "huge.off", "--n", "1", "--out", "huge",
+        ],
+        "too small or too large",
+    );
+    assert!(!e.contains("NaN"), "{e}");
     // a set of single shapes is not a pairs set: named as such
     write_frames(d, 6);
     ok(d, &["dataset", "import", "frames", "--out", "single"]);

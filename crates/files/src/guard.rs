@@ -107,7 +107,6 @@ impl Outputs {
         let mut seen: Vec<(&PathBuf, Identity)> = Vec::new();
         for out in &self.outputs {
             resolve_target(out)?;
-            crate::owned::refuse_writing_into(out)?;
             let id = Identity::of(out);
             for (input, input_id) in &inputs {
                 if id.same_file(input_id) {
@@ -130,6 +129,10 @@ impl Outputs {
                 });
             }
             seen.push((out, id));
+        }
+        // after the input rules, which name the more precise problem
+        for out in &self.outputs {
+            crate::owned::refuse_writing_into(out)?;
         }
         if let Some(existing) = self.implicit.iter().find(|p| p.symlink_metadata().is_ok()) {
             return Err(FileError::ImplicitExists {

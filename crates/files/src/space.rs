@@ -133,6 +133,32 @@ mod tests {
     }
 
     #[test]
+    fn the_free_space_rule_is_stated_with_its_margin() {
+        let dir = tempfile::tempdir().unwrap();
+        let Some(available) = super::available_bytes(dir.path()).unwrap() else {
+            return;
+        };
+        let margin = super::margin(available);
+        assert!(margin >= 16 << 20 && margin >= available / 100);
+        // fits with the margin (and room for other writers meanwhile), and
+        // all the free space does not: the margin is the rule
+        let fits = available
+            .saturating_sub(2 * margin)
+            .saturating_sub(256 << 20);
+        if fits > 0 {
+            super::ensure_space(dir.path(), fits).unwrap();
+        }
+        let e = super::ensure_space(dir.path(), available).unwrap_err();
+        let text = e.to_string();
+        assert!(
+            text.contains("disk full")
+                && text.contains("1% of the free space, at least 16 MiB")
+                && text.contains(&super::human_bytes(margin)),
+            "{text}"
+        );
+    }
+
+    #[test]
     fn memory_beyond_the_machine_is_refused() {
         super::ensure_memory("a few bytes", 16, 8).unwrap();
         let e = super::ensure_memory("10^15 values", 10u128.pow(15), 8).unwrap_err();

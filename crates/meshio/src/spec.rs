@@ -191,6 +191,89 @@ pub fn spec_path(spec: &str) -> Option<&Path> {
     (!spec.starts_with(BUILTIN_PREFIX)).then(|| Path::new(spec))
 }
 
+/// A mesh named by one command-line argument: `builtin:NAME[:N]`, or a
+/// file whose name may be any the system allows (UTF-8 or not: a name that
+/// is not UTF-8 is always a file). Shown with [`Path::display`]'s
+/// replacement characters.
+///
+/// # Example
+/// ```
+/// use mfm_meshio::spec::MeshSpec;
+/// let spec = MeshSpec::from("builtin:icosphere:1");
+/// assert!(spec.path().is_none());
+/// assert_eq!(spec.load().unwrap().num_vertices(), 42);
+/// #[cfg(unix)]
+/// {
+///     use std::os::unix::ffi::OsStringExt;
+///     let latin1 = MeshSpec::from(std::ffi::OsString::from_vec(b"caf\xe9.obj".to_vec()));
+///     assert_eq!(latin1.to_string(), "caf\u{fffd}.obj");
+///     assert!(latin1.path().is_some());
+/// }
+/// ```
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct MeshSpec(std::ffi::OsString);
+
+impl MeshSpec {
+    /// The file, `None` for a built-in mesh.
+    pub fn path(&self) -> Option<&Path> {
+        match self.0.to_str() {
+            Some(s) => spec_path(s),
+            None => Some(Path::new(&self.0)),
+        }
+    }
+
+    /// The mesh ([`load_mesh_spec`]).
+    ///
+    /// # Errors
+    /// As [`load_mesh_spec`].
+    pub fn load(&self) -> Result<TriMesh, MeshSpecError> {
+        match self.0.to_str() {
+            Some(s) => load_mesh_spec(s),
+            None => Ok(read_mesh(Path::new(&self.0))?),
+        }
+    }
+
+    /// The mesh for computing on ([`load_mesh_spec_checked`]).
+    ///
+    /// # Errors
+    /// As [`load_mesh_spec_checked`].
+    pub fn load_checked(&self) -> Result<CheckedMesh, MeshSpecError> {
+        let mesh = self.load()?;
+        let warnings = check_mesh(&self.to_string(), &mesh)?;
+        Ok(CheckedMesh { mesh, warnings })
+    }
+}
+
+impl std::fmt::Display for MeshSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}", Path::new(&self.0).display())
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for MeshSpec {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        &self.0
+    }
+}
+
+impl From<std::ffi::OsString> for MeshSpec {
+    fn from(s: std::ffi::OsString) -> Self {
+        Self(s)
+    }
+}
+
+impl From<&str> for MeshSpec {
+    fn from(s: &str) -> Self {
+        Self(s.into())
+    }
+}
+
+impl From<String> for MeshSpec {
+    fn from(s: String) -> Self {
+        Self(s.into())
+    }
+}
+
 /// A mesh loaded for computing on, with the problems that did not stop it.
 #[derive(Clone, Debug)]
 pub struct CheckedMesh {

@@ -218,20 +218,22 @@ fn f32_is_the_rounded_f64_sample() {
     assert_eq!(part.data(), &want.data()[7 * v * 3..16 * v * 3]);
 }
 
-/// Negative, NaN and infinite `tau` are rejected with a message that says
-/// what is allowed; `tau = 0` on an operator without a Laplacian (nothing
-/// to regularize against) is rejected too.
+/// Negative, NaN and infinite `tau`, and `tau` so large the noise vanishes
+/// (beyond `MAX_TAU`), are rejected with a message that says what is
+/// allowed; `tau = 0` on an operator without a Laplacian (nothing to
+/// regularize against) is rejected too.
 #[test]
 fn invalid_tau_is_rejected() {
     let mesh = procedural::icosphere(1);
-    for tau in [-1.0, -1e-300, f64::NAN, f64::INFINITY] {
+    for tau in [-1.0, -1e-300, f64::NAN, f64::INFINITY, 1.01e10, 1e300] {
         let e = NoiseSampler::new(&mesh, NoiseKind::Matern { tau }).unwrap_err();
         assert!(
             matches!(e, NoiseError::InvalidParameter { name: "tau", .. }),
             "{tau}: {e}"
         );
-        assert!(e.to_string().contains(">= 0"), "{e}");
+        assert!(e.to_string().contains("in [0, 1e10]"), "{e}");
     }
+    assert!(NoiseSampler::new(&mesh, NoiseKind::Matern { tau: 1e10 }).is_ok());
     let zero = SparseColMat::<usize, f64>::try_new_from_triplets(3, 3, &[Triplet::new(0, 0, 0.0)])
         .unwrap();
     let e = NoiseSampler::from_operators(&zero, &[1.0; 3], UNSCREENED).unwrap_err();
