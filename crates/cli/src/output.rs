@@ -9,18 +9,22 @@ pub use mfm_files::ensure_empty_dir as ensure_empty;
 
 /// Refuses outputs that are inputs, lie in an input folder or a folder
 /// another command owns, name one file twice or are not regular files,
-/// and `implicit` outputs (written without the user naming them) that
-/// exist; creates the outputs' folders, and returns the
-/// [`mfm_files::Undo`] of what the command creates.
+/// and `implicit` outputs (written without the user naming them, the
+/// companions of `outputs[0]`) that exist when `outputs[0]` does not;
+/// creates the outputs' folders, and returns the [`mfm_files::Undo`] of
+/// what the command creates.
 pub fn prepare_outputs(
     inputs: &[Option<&Path>],
     outputs: &[PathBuf],
     implicit: &[PathBuf],
 ) -> Result<mfm_files::Undo> {
     let guard = mfm_files::Outputs::new().inputs(inputs.iter().flatten());
-    let guard = implicit
-        .iter()
-        .fold(guard.outputs(outputs), |g, p| g.implicit(p));
+    let guard = match outputs.first() {
+        Some(main) => implicit
+            .iter()
+            .fold(guard.outputs(outputs), |g, p| g.implicit(p, main)),
+        None => guard.outputs(implicit),
+    };
     Ok(guard.prepare()?)
 }
 

@@ -167,10 +167,12 @@ fn implicit_companions_never_replace_a_file() {
         "mine"
     );
     assert!(!d.join("s.json").exists());
-    // named outputs are still replaced as asked
+    // the same command again over its own earlier result replaces both
     ok(d, &["noise", ico, "--out", "m.npy"]);
-    fs::remove_file(d.join("m.json")).unwrap();
-    ok(d, &["noise", ico, "--out", "m.npy"]);
+    ok(d, &["noise", ico, "--out", "m.npy", "--seed", "3"]);
+    // a summary whose output is gone is an earlier result of its own
+    fs::remove_file(d.join("m.npy")).unwrap();
+    refused(d, &["noise", ico, "--out", "m.npy"], "m.json exists");
 }
 
 #[test]

@@ -33,7 +33,8 @@ use std::path::{Component, Path, PathBuf};
 pub struct Outputs {
     inputs: Vec<PathBuf>,
     outputs: Vec<PathBuf>,
-    implicit: Vec<PathBuf>,
+    /// (companion, the named output it goes with)
+    implicit: Vec<(PathBuf, PathBuf)>,
 }
 
 impl Outputs {
@@ -57,22 +58,26 @@ impl Outputs {
     }
 
     /// Adds a file the command writes without the user naming it (a
-    /// summary beside `--out`, a plot of a fixed name): it is an output,
-    /// and it must not exist, so that it never replaces a file the user
-    /// did not ask to replace.
+    /// summary beside `--out`, a plot of a fixed name) as the companion of
+    /// the named output `of`: it is an output, and it may replace an
+    /// existing file only when `of` exists too (the same command run again
+    /// over its own earlier result); otherwise an existing file there is
+    /// someone else's, and the check refuses.
     ///
     /// ```
     /// let dir = tempfile::tempdir().unwrap();
-    /// std::fs::write(dir.path().join("x.json"), "mine").unwrap();
-    /// let err = mfm_files::Outputs::new()
-    ///     .output(dir.path().join("x.npy"))
-    ///     .implicit(dir.path().join("x.json"))
-    ///     .check()
-    ///     .unwrap_err();
+    /// let (npy, json) = (dir.path().join("x.npy"), dir.path().join("x.json"));
+    /// std::fs::write(&json, "mine").unwrap();
+    /// let guard = mfm_files::Outputs::new().output(&npy).implicit(&json, &npy);
+    /// let err = guard.check().unwrap_err();
     /// assert!(err.to_string().contains("x.json exists"));
+    /// // x.npy's own summary, written by an earlier run, is replaced with it
+    /// std::fs::write(&npy, "an earlier result").unwrap();
+    /// assert!(guard.check().is_ok());
     /// ```
-    pub fn implicit(mut self, path: impl AsRef<Path>) -> Self {
-        self.implicit.push(path.as_ref().to_path_buf());
+    pub fn implicit(mut self, path: impl AsRef<Path>, of: impl AsRef<Path>) -> Self {
+        self.implicit
+            .push((path.as_ref().to_path_buf(), of.as_ref().to_path_buf()));
         self.output(path)
     }
 
@@ -134,7 +139,11 @@ impl Outputs {
         for out in &self.outputs {
             crate::owned::refuse_writing_into(out)?;
         }
-        if let Some(existing) = self.implicit.iter().find(|p| p.symlink_metadata().is_ok()) {
+        if let Some((existing, _)) = self
+            .implicit
+            .iter()
+            .find(|(p, of)| p.symlink_metadata().is_ok() && of.symlink_metadata().is_err())
+        {
             return Err(FileError::ImplicitExists {
                 path: existing.clone(),
             });
