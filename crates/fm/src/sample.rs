@@ -132,7 +132,7 @@ pub struct SampleRequest {
     pub seed: u64,
     /// How many of the first samples to return in memory.
     pub keep: usize,
-    /// Show a progress bar (when there is more than one chunk).
+    /// Show a progress bar over the ODE steps of every sample.
     pub progress: bool,
 }
 
@@ -498,6 +498,25 @@ impl Sampler {
         seed: u64,
         options: &SampleOptions,
     ) -> Result<Samples> {
+        self.sample_on_reporting(target, first, count, seed, options, &|_| {})
+    }
+
+    /// [`Sampler::sample_on`] that calls `on_step(b)` after every ODE step
+    /// of a batch of `b` samples (for a progress bar over the steps: on a
+    /// mesh of a million faces one step takes seconds). The samples are the
+    /// same.
+    ///
+    /// # Errors
+    /// As [`Sampler::sample_on`].
+    pub fn sample_on_reporting(
+        &self,
+        target: &TargetMesh,
+        first: usize,
+        count: usize,
+        seed: u64,
+        options: &SampleOptions,
+        on_step: &dyn Fn(usize),
+    ) -> Result<Samples> {
         if options.steps == 0 || options.batch == 0 {
             return Err(FmError::Config(format!(
                 "sampling needs at least one step and a batch of at least one, found steps = {} and batch = {}",
@@ -514,7 +533,7 @@ impl Sampler {
             let t0 = Instant::now();
             let x0 = self.noise(target, first + done, b, seed)?;
             noise_seconds += t0.elapsed().as_secs_f64();
-            let x1 = self.finish(&self.integrate(target, &x0, options)?);
+            let x1 = self.finish(&self.integrate_reporting(target, &x0, options, &|| on_step(b))?);
             let flat = x1.to_device(Device::Cpu).contiguous().view([-1]);
             let values = Vec::<f32>::try_from(&flat)?;
             data.extend_from_slice(&values);
@@ -564,17 +583,30 @@ impl Sampler {
             .max(1);
         let shape = [n as u64, v as u64, c as u64];
         let mut file = mfm_files::npy::NpyStream::<f32>::create(path, &shape)?;
-        let bar = if progress && n > chunk {
-            indicatif::ProgressBar::new(n as u64)
+        // over ODE steps of every sample: on a fine mesh one step of one
+        // batch takes seconds, a chunk minutes
+        let steps = options.steps as u64;
+        let bar = if progress {
+            indicatif::ProgressBar::new(n as u64 * steps)
         } else {
             indicatif::ProgressBar::hidden()
         };
+        if let Ok(style) = indicatif::ProgressStyle::with_template(
+            "sampling {elapsed_precise} [{bar:30}] {msg}, eta {eta}",
+        ) {
+            bar.set_style(style.progress_chars("=> "));
+        }
         let mut kept: Vec<f32> = Vec::with_capacity(keep * row);
         let (mut seconds, mut noise_seconds) = (0.0, 0.0);
         let mut first = 0;
         while first < n {
             let count = chunk.min(n - first);
-            let part = self.sample_on(target, first, count, seed, options)?;
+            bar.set_message(format!(
+                "samples {first}..{} of {n}, {steps} ODE steps each",
+                first + count
+            ));
+            let part = self
+                .sample_on_reporting(target, first, count, seed, options, &|b| bar.inc(b as u64))?;
             if let Some((i, vertex, channel, value)) =
                 mfm_data::signals::first_non_finite(&part.data, v, c)
             {
@@ -589,7 +621,7 @@ impl Sampler {
             seconds += part.seconds;
             noise_seconds += part.noise_seconds;
             first += count;
-            bar.set_position(first as u64);
+            bar.set_position(first as u64 * steps);
         }
         bar.finish_and_clear();
         file.finish()?;
@@ -699,6 +731,20 @@ impl Sampler {
         x0: &Tensor,
         options: &SampleOptions,
     ) -> Result<Tensor> {
+        self.integrate_reporting(target, x0, options, &|| {})
+    }
+
+    /// [`Sampler::integrate`] that calls `on_step()` after every step.
+    ///
+    /// # Errors
+    /// As [`Sampler::integrate`].
+    pub fn integrate_reporting(
+        &self,
+        target: &TargetMesh,
+        x0: &Tensor,
+        options: &SampleOptions,
+        on_step: &dyn Fn(),
+    ) -> Result<Tensor> {
         if options.steps == 0 {
             return Err(FmError::Config(
                 "sampling needs at least one ODE step".into(),
@@ -735,6 +781,7 @@ impl Sampler {
                     &x + velocity(&mid, t + h / 2.0, k)? * h
                 }
             };
+            on_step();
         }
         if !bool::try_from(x.isfinite().all()).unwrap_or(false) {
             return Err(FmError::Diverged(format!(

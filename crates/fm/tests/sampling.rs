@@ -236,6 +236,37 @@ fn zero_velocity_returns_the_noise() {
 }
 
 #[test]
+fn every_ode_step_of_every_batch_is_reported_and_changes_nothing() {
+    let mesh = procedural::icosphere(1);
+    let sampler = Sampler::new(
+        affine_velocity_net(0.8, 0.25),
+        flow(NoiseKind::Matern { tau: 10.0 }, 0.15),
+    )
+    .unwrap();
+    let target = sampler.prepare(&mesh).unwrap();
+    for method in [OdeMethod::Euler, OdeMethod::Midpoint] {
+        let opts = SampleOptions {
+            steps: 4,
+            method,
+            batch: 2,
+        };
+        let reports = std::sync::Mutex::new(Vec::new());
+        let seen = sampler
+            .sample_on_reporting(&target, 1, 5, 7, &opts, &|b| {
+                reports.lock().unwrap().push(b)
+            })
+            .unwrap();
+        // batches of 2, 2, 1 samples, each reported once per ODE step
+        let want: Vec<usize> = [2, 2, 1].iter().flat_map(|&b| [b; 4]).collect();
+        assert_eq!(reports.into_inner().unwrap(), want);
+        assert_eq!(
+            seen.data,
+            sampler.sample_on(&target, 1, 5, 7, &opts).unwrap().data
+        );
+    }
+}
+
+#[test]
 fn euler_and_midpoint_match_their_recurrences_and_converge_at_their_orders() {
     // dx/dt = a x + b (b = head bias + velocity offset), x(1) = (x0 + b/a) e^a - b/a
     let (a, bias, offset) = (0.8, 0.25, 0.15);
