@@ -66,12 +66,13 @@ impl Undo {
             first_missing = Some(q.to_path_buf());
             p = q.parent();
         }
-        fs::create_dir_all(dir).map_err(|e| FileError::io(dir, e))?;
+        // recorded (and told to an interrupt) before it exists, so that no
+        // moment leaves a folder of ours unrecorded
         if let Some(d) = first_missing {
             self.created.push(d);
             self.announce();
         }
-        Ok(())
+        fs::create_dir_all(dir).map_err(|e| FileError::io(dir, e))
     }
 
     /// Records a file the command is about to create; a file that exists
