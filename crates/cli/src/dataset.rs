@@ -484,7 +484,7 @@ fn dataset_import(a: ImportArgs) -> Result<()> {
     );
     mfm_files::Outputs::new()
         .inputs(&inputs_read)
-        .output(&a.out)
+        .folder(&a.out)
         .check()?;
     let _lock = crate::output::claim_dataset_folder(&a.out)?;
     let mut skipped = 0;

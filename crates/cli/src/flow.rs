@@ -167,7 +167,11 @@ pub fn train(a: TrainArgs) -> Result<()> {
         }
     }
     if !a.resume {
-        refuse_run_inside(&a.out, a.dataset.as_deref())?;
+        // never inside the dataset it reads, nor in a folder another command owns
+        mfm_files::Outputs::new()
+            .inputs(a.dataset.as_deref())
+            .folder(&a.out)
+            .check()?;
     }
     let lock = crate::output::lock_folder(&a.out)?;
     if a.mode != crate::arbitrary::TrainMode::Flow {
@@ -444,23 +448,5 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         opts.method,
         a.out.display()
     );
-    Ok(())
-}
-
-/// Refuses a new run folder `out` inside the dataset it trains on or in a
-/// folder another command owns (a dataset, an experiment, a run's
-/// checkpoints): the README's rule for every writer.
-fn refuse_run_inside(out: &Path, dataset: Option<&Path>) -> Result<()> {
-    use mfm_files::guard::absolute_resolved;
-    if let Some(data) = dataset.filter(|d| d.is_dir())
-        && absolute_resolved(out).starts_with(absolute_resolved(data))
-    {
-        return Err(mfm_files::FileError::OutputInsideInput {
-            output: out.to_path_buf(),
-            input: data.to_path_buf(),
-        }
-        .into());
-    }
-    mfm_files::owned::refuse_writing_into(out)?;
     Ok(())
 }

@@ -9,7 +9,7 @@ use std::process::Command;
 mod common;
 #[cfg(feature = "network")]
 use common::TINY;
-use common::{err, ok, refused};
+use common::{err, interrupt_when, ok, refused, signals_when};
 
 fn tmp_files(dir: &Path) -> Vec<String> {
     let mut found = Vec::new();
@@ -743,7 +743,7 @@ fn runs_survive_signals_edits_moves_and_damage() {
     let o = signals_when(
         &moved,
         &["train", "--out", "long", "--resume", "--quiet"],
-        || fs::read_to_string(&log).map_or(0, |l| l.lines().count()) > lines + 2,
+        |_| fs::read_to_string(&log).map_or(0, |l| l.lines().count()) > lines + 2,
         &["-TERM", "-TERM"],
     );
     assert_eq!(o.status.code(), Some(130), "{}", err(&o));
@@ -1892,46 +1892,6 @@ fn a_sampling_mesh_of_another_topology_is_warned_about() {
         "{}",
         err(&o)
     );
-}
-
-/// Starts `mfm args` in `dir`, waits (up to two minutes) until `ready`
-/// holds, sends `signal` and returns the exit output.
-fn interrupt_when(
-    dir: &Path,
-    args: &[&str],
-    ready: impl Fn() -> bool,
-    signal: &str,
-) -> std::process::Output {
-    signals_when(dir, args, ready, &[signal])
-}
-
-/// [`interrupt_when`] sending each of `signals` in turn, at once.
-fn signals_when(
-    dir: &Path,
-    args: &[&str],
-    ready: impl Fn() -> bool,
-    signals: &[&str],
-) -> std::process::Output {
-    let child = Command::new(env!("CARGO_BIN_EXE_mfm"))
-        .current_dir(dir)
-        .args(args)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let t0 = std::time::Instant::now();
-    while !ready() {
-        assert!(t0.elapsed().as_secs() < 120, "{args:?} did not get going");
-        std::thread::sleep(std::time::Duration::from_millis(10));
-    }
-    for signal in signals {
-        let status = Command::new("kill")
-            .args([*signal, &child.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(status.success());
-    }
-    child.wait_with_output().unwrap()
 }
 
 #[test]

@@ -9,7 +9,7 @@ use std::fs;
 use std::path::Path;
 
 mod common;
-use common::{ok, refused};
+use common::{interrupt_when, ok, refused, signals_when};
 
 /// A small GMM experiment `DIR/data` (train and reference sets) and a
 /// folder `DIR/run` that holds what marks a training run.
@@ -105,21 +105,7 @@ fn writers_never_write_into_datasets_experiments_or_runs() {
             vec!["eigs", ico, "--k", "3", "--out", "run/checkpoints/eigs"],
             "checkpoints folder",
         ),
-        (
-            vec![
-                "spectrum",
-                ico,
-                "--samples",
-                "4",
-                "--k",
-                "4",
-                "--out",
-                "s.json",
-                "--plots",
-                "data/train",
-            ],
-            "a dataset folder",
-        ),
+        (spectrum("4", "data/train", &[]), "a dataset folder"),
     ] {
         let e = refused(d, &args, folder);
         assert!(e.contains("never writes into"), "{args:?}: {e}");
@@ -146,22 +132,7 @@ fn implicit_companions_never_replace_a_file() {
     assert!(!d.join("n.npy").exists());
     fs::create_dir(d.join("plots")).unwrap();
     fs::write(d.join("plots/variance.png"), "mine").unwrap();
-    refused(
-        d,
-        &[
-            "spectrum",
-            ico,
-            "--samples",
-            "4",
-            "--k",
-            "4",
-            "--out",
-            "s.json",
-            "--plots",
-            "plots",
-        ],
-        "variance.png exists",
-    );
+    refused(d, &spectrum("4", "plots", &[]), "variance.png exists");
     assert_eq!(
         fs::read_to_string(d.join("plots/variance.png")).unwrap(),
         "mine"
@@ -310,106 +281,94 @@ fn sampling_keeps_its_starting_noise_and_reads_its_run_configuration() {
 fn sizes_and_values_that_make_no_sense_are_refused_up_front() {
     let d = tempfile::tempdir().unwrap();
     let d = d.path();
-    let gmm = |extra: &[&str]| -> Vec<String> {
-        [
-            "dataset",
-            "gmm",
-            "--mesh",
-            "builtin:icosphere:1",
-            "--n",
-            "2",
-        ]
-        .iter()
-        .chain(extra)
-        .map(|s| s.to_string())
-        .collect()
-    };
-    let check = |args: Vec<String>, needle: &str| {
-        let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        let e = refused(d, &args, needle);
+    let check = |args: &[&str], needle: &str| {
+        let e = refused(d, args, needle);
         assert!(!e.contains("panicked") && !e.contains("NaN"), "{e}");
     };
+    let gmm = [
+        "dataset",
+        "gmm",
+        "--mesh",
+        "builtin:icosphere:1",
+        "--n",
+        "2",
+    ];
+    let deform = [
+        "dataset",
+        "deform",
+        "--mesh",
+        "builtin:capsule",
+        "--out",
+        "dd",
+    ];
     // a bump count beyond the mesh: no overflow, no 32 GB allocation
     for bumps in ["18446744073709551615", "4000000000"] {
         check(
-            gmm(&["--bumps", bumps, "--out", "g"]),
+            &[&gmm[..], &["--bumps", bumps, "--out", "g"]].concat(),
             "at most the mesh's 42 vertices",
         );
     }
     // a bump width that underflows
-    check(gmm(&["--sigma", "1e-300", "--out", "g"]), "gmm.sigma");
+    check(
+        &[&gmm[..], &["--sigma", "1e-300", "--out", "g"]].concat(),
+        "gmm.sigma",
+    );
     assert!(!d.join("g").exists() && !d.join(".g.mfm-lock").exists());
     // a handle count that wraps around
     check(
-        vec![
-            "dataset".into(),
-            "deform".into(),
-            "--mesh".into(),
-            "builtin:capsule".into(),
-            "--handles".into(),
-            "18446744073709551615".into(),
-            "--out".into(),
-            "dd".into(),
-        ],
+        &[&deform[..], &["--handles", "18446744073709551615"]].concat(),
         "cannot place 18446744073709551615 handles",
     );
     // a translation that tears the shape apart
     check(
-        vec![
-            "dataset".into(),
-            "deform".into(),
-            "--mesh".into(),
-            "builtin:capsule".into(),
-            "--max-shift".into(),
-            "1e20".into(),
-            "--out".into(),
-            "dd".into(),
-        ],
+        &[&deform[..], &["--max-shift", "1e20"]].concat(),
         "max_shift",
     );
     assert!(!d.join("dd").exists());
     // screening so strong the noise vanishes
     check(
-        vec![
-            "noise".into(),
-            "builtin:icosphere:1".into(),
-            "--kind".into(),
-            "matern".into(),
-            "--tau".into(),
-            "1e300".into(),
-            "--out".into(),
-            "n.npy".into(),
+        &[
+            "noise",
+            "builtin:icosphere:1",
+            "--kind",
+            "matern",
+            "--tau",
+            "1e300",
+            "--out",
+            "n.npy",
         ],
         "[0, 1e10]",
     );
     // built-in meshes beyond their cap are refused before they are built
-    check(
-        vec!["info".into(), "builtin:grid:100000".into()],
-        "at most 1024",
-    );
+    check(&["info", "builtin:grid:100000"], "at most 1024");
     // a plotted frequency that is not measured
     check(
-        vec![
-            "spectrum".into(),
-            "builtin:icosphere:1".into(),
-            "--samples".into(),
-            "4".into(),
-            "--k".into(),
-            "8".into(),
-            "--out".into(),
-            "s.json".into(),
-            "--plots".into(),
-            "p".into(),
-            "--coefficients".into(),
-            "2,999".into(),
-        ],
+        &spectrum("8", "p", &["--coefficients", "2,999"]),
         "--coefficients 999",
     );
     assert!(!d.join("s.json").exists());
     // a folder's path that holds a file
     fs::write(d.join("taken"), "mine").unwrap();
-    check(gmm(&["--out", "taken"]), "is not a folder");
+    check(&[&gmm[..], &["--out", "taken"]].concat(), "is not a folder");
     assert_eq!(fs::read_to_string(d.join("taken")).unwrap(), "mine");
+}
+
+/// `mfm spectrum` of `builtin:icosphere:1` with 4 samples and `k`
+/// frequencies into `s.json`, plots into `plots`, then `extra`.
+fn spectrum<'a>(k: &'a str, plots: &'a str, extra: &[&'a str]) -> Vec<&'a str> {
+    let base = [
+        "spectrum",
+        "builtin:icosphere:1",
+        "--samples",
+        "4",
+        "--k",
+        k,
+        "--out",
+        "s.json",
+        "--plots",
+        plots,
+    ];
+    [&base[..], extra].concat()
 }
 
 #[test]
@@ -432,20 +391,6 @@ fn a_signal_while_starting_is_an_interrupt_too() {
     let d = tempfile::tempdir().unwrap();
     let d = d.path();
     for signal in ["-TERM", "-HUP", "-INT"] {
-        let child = std::process::Command::new(env!("CARGO_BIN_EXE_mfm"))
-            .current_dir(d)
-            .args([
-                "dataset",
-                "gmm",
-                "--mesh",
-                "builtin:icosphere:1",
-                "--out",
-                "g",
-            ])
-            .stderr(std::process::Stdio::piped())
-            .stdout(std::process::Stdio::null())
-            .spawn()
-            .unwrap();
         // as soon as the process catches the three signals: past the
         // dynamic loader (no code of any kind runs before it), in the
         // libraries' start-up or later (then the command's own handler
@@ -458,20 +403,22 @@ fn a_signal_while_starting_is_an_interrupt_too() {
                 .and_then(|m| u64::from_str_radix(m.trim(), 16).ok())
                 .is_some_and(|m| m & 0x4003 == 0x4003)
         };
-        let t0 = std::time::Instant::now();
-        while !caught(child.id()) {
-            assert!(t0.elapsed().as_secs() < 60, "no handler installed");
-            std::thread::sleep(std::time::Duration::from_micros(200));
-        }
-        let sent = std::process::Command::new("kill")
-            .args([signal, &child.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(sent.success());
-        let o = child.wait_with_output().unwrap();
+        let o = signals_when(
+            d,
+            &[
+                "dataset",
+                "gmm",
+                "--mesh",
+                "builtin:icosphere:1",
+                "--out",
+                "g",
+            ],
+            caught,
+            &[signal],
+        );
         assert_eq!(o.status.code(), Some(130), "{signal}: {}", common::err(&o));
         // the handler was there before the libraries finished starting
-        // (a network build spends ~0.15 s there; polling takes 0.2 ms)
+        // (a network build spends ~0.15 s there; polling takes 1 ms)
         assert!(
             common::err(&o).contains("while starting"),
             "{signal}: {}",
@@ -524,31 +471,6 @@ fn devices_and_fifos_are_refused_as_inputs() {
     assert!(started.elapsed().as_secs() < 60);
 }
 
-/// Runs `mfm ARGS` in `dir` and kills it (SIGKILL) once `ready` holds;
-/// `false` when the command finished first.
-fn killed_when(dir: &Path, args: &[&str], ready: impl Fn() -> bool) -> bool {
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_mfm"))
-        .current_dir(dir)
-        .args(args)
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .unwrap();
-    let t0 = std::time::Instant::now();
-    loop {
-        if ready() {
-            child.kill().unwrap();
-            child.wait().unwrap();
-            return true;
-        }
-        if child.try_wait().unwrap().is_some() {
-            return false;
-        }
-        assert!(t0.elapsed().as_secs() < 300, "{args:?} never got there");
-        std::thread::sleep(std::time::Duration::from_millis(2));
-    }
-}
-
 #[test]
 fn what_a_killed_dataset_command_left_is_cleared_by_the_next_one() {
     let d = tempfile::tempdir().unwrap();
@@ -568,7 +490,8 @@ fn what_a_killed_dataset_command_left_is_cleared_by_the_next_one() {
         "dd",
     ];
     // killed after its meshes and space, before its sets
-    assert!(killed_when(d, &deform, || d.join("dd/space.json").exists()));
+    let o = interrupt_when(d, &deform, || d.join("dd/space.json").exists(), "-KILL");
+    assert_eq!(o.status.code(), None, "killed before it finished");
     assert!(d.join("dd").exists() && d.join(".dd.mfm-lock").exists());
     let o = ok(d, &deform);
     assert!(
@@ -618,7 +541,8 @@ fn a_killed_sample_leaves_nothing_that_stops_the_rerun() {
                 .any(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
         })
     };
-    assert!(killed_when(d, &args, temporary));
+    let o = interrupt_when(d, &args, temporary, "-KILL");
+    assert_eq!(o.status.code(), None, "killed before it finished");
     assert!(temporary(), "the kill left its temporary");
     ok(d, &args);
     assert!(d.join("s/samples.npy").is_file());

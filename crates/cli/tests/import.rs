@@ -56,6 +56,8 @@ fn imported_frames_evaluate_against_themselves() {
     let d = tempfile::tempdir().unwrap();
     let d = d.path();
     write_frames(d, 24);
+    // --out may be an empty folder, as for every `mfm dataset` command
+    std::fs::create_dir(d.join("data")).unwrap();
     let out = stdout_of(
         d,
         &[
@@ -265,9 +267,9 @@ fn an_interrupted_import_leaves_nothing() {
     let n = 600;
     let values: Vec<f32> = (0..n * v * 3).map(|i| (i % 1000) as f32 * 1e-3).collect();
     mfm_files::npy::write(d.join("big.npy"), &values, &[n as u64, v as u64, 3]).unwrap();
-    let child = Command::new(env!("CARGO_BIN_EXE_mfm"))
-        .current_dir(d)
-        .args([
+    let o = common::interrupt_when(
+        d,
+        &[
             "dataset",
             "import",
             "--signals",
@@ -278,22 +280,10 @@ fn an_interrupted_import_leaves_nothing() {
             "10%",
             "--out",
             "data",
-        ])
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let t0 = std::time::Instant::now();
-    while !d.join("data").exists() {
-        assert!(t0.elapsed().as_secs() < 120, "the import did not get going");
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let o = child.wait_with_output().unwrap();
+        ],
+        || d.join("data").exists(),
+        "-INT",
+    );
     if o.status.success() {
         eprintln!("the import finished before the signal; nothing to check");
         return;

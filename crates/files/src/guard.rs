@@ -35,6 +35,8 @@ pub struct Outputs {
     outputs: Vec<PathBuf>,
     /// (companion, the named output it goes with)
     implicit: Vec<(PathBuf, PathBuf)>,
+    /// Outputs that are folders a command fills (may exist as folders).
+    folders: Vec<PathBuf>,
 }
 
 impl Outputs {
@@ -55,6 +57,24 @@ impl Outputs {
     pub fn output(mut self, path: impl AsRef<Path>) -> Self {
         self.outputs.push(path.as_ref().to_path_buf());
         self
+    }
+
+    /// Adds a folder the command fills (a run, a dataset): an output under
+    /// every rule but that it may exist as a folder (whether it may hold
+    /// anything is the command's own check, e.g. [`ensure_empty_dir`]).
+    /// [`Outputs::prepare`] leaves it to the command.
+    ///
+    /// ```
+    /// let dir = tempfile::tempdir().unwrap();
+    /// let data = dir.path().join("data");
+    /// std::fs::create_dir(&data).unwrap();
+    /// let inside = mfm_files::Outputs::new().input(&data).folder(data.join("run"));
+    /// assert!(inside.check().unwrap_err().to_string().contains("inside the input folder"));
+    /// assert!(mfm_files::Outputs::new().folder(&data).check().is_ok());
+    /// ```
+    pub fn folder(mut self, path: impl AsRef<Path>) -> Self {
+        self.folders.push(path.as_ref().to_path_buf());
+        self.output(path)
     }
 
     /// Adds a file the command writes without the user naming it (a
@@ -111,7 +131,11 @@ impl Outputs {
             .collect();
         let mut seen: Vec<(&PathBuf, Identity)> = Vec::new();
         for out in &self.outputs {
-            resolve_target(out)?;
+            if !self.folders.contains(out) {
+                resolve_target(out)?;
+            } else if out.exists() && !out.is_dir() {
+                return Err(FileError::NotAFolder { path: out.clone() });
+            }
             let id = Identity::of(out);
             for (input, input_id) in &inputs {
                 if id.same_file(input_id) {
@@ -162,7 +186,7 @@ impl Outputs {
     pub fn prepare(&self) -> Result<Undo, FileError> {
         self.check()?;
         let mut undo = Undo::new();
-        for out in &self.outputs {
+        for out in self.outputs.iter().filter(|o| !self.folders.contains(o)) {
             if let Some(dir) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
                 undo.create_dir_all(dir)?;
             }
