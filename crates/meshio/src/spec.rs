@@ -290,9 +290,7 @@ pub struct CheckedMesh {
 /// # Errors
 /// Those of [`load_mesh_spec`], and [`MeshSpecError::DuplicateFaces`].
 pub fn load_mesh_spec_checked(spec: &str) -> Result<CheckedMesh, MeshSpecError> {
-    let mesh = load_mesh_spec(spec)?;
-    let warnings = check_mesh(spec, &mesh)?;
-    Ok(CheckedMesh { mesh, warnings })
+    MeshSpec::from(spec).load_checked()
 }
 
 /// The policy of [`load_mesh_spec_checked`] on a mesh already loaded: the
