@@ -55,7 +55,8 @@ pub struct TrainArgs {
     #[arg(long)]
     pub(crate) seed: Option<u64>,
     /// Noise the flow starts from (overrides noise.kind): matern:TAU,
-    /// matern-normalized:C, white, naive, explicit:K:TAU.
+    /// matern-normalized:C, matern-smooth:TAU:P (smoother: for sampling on
+    /// much finer meshes), white, naive, explicit:K:TAU.
     #[arg(long)]
     pub(crate) noise: Option<mfm_noise::NoiseKind>,
     /// Where to train: auto (a GPU when libtorch sees one), cpu or cuda

@@ -15,7 +15,9 @@ mod mesh;
 mod net;
 #[cfg(feature = "network")]
 mod official;
+mod openmp;
 mod output;
+mod preinit;
 mod spectral;
 #[cfg(not(feature = "network"))]
 mod unavailable;

@@ -88,8 +88,10 @@ fn bench(a: BenchArgs) -> Result<()> {
     };
     let (w, k, nl) = (config.width, config.blocks, config.vector_layers);
     println!(
-        "preset {} (W{w} K{k} nl{nl}) on {:?}",
-        a.preset, opts.device
+        "preset {} (W{w} K{k} nl{nl}) on {:?}; OpenMP workers wait with {}",
+        a.preset,
+        opts.device,
+        crate::openmp::describe()
     );
     let report =
         bench_training_step(&mesh, &config, &opts).context("benchmarking the training step")?;

@@ -99,11 +99,11 @@ pub fn clean_up_on_interrupt() {
 /// Signals that come before `main` installs the command's own handler (a
 /// network build spends its first fraction of a second in libtorch's
 /// start-up, before any Rust code runs) end the process as an interrupt
-/// does: status 130, with nothing written yet to remove. Installed from
-/// the executable's `.preinit_array`, which runs before every shared
-/// library's initializers; the command's handler replaces it.
+/// does: status 130, with nothing written yet to remove. Installed by
+/// [`crate::preinit`], before every shared library's initializers; the
+/// command's handler replaces it.
 #[cfg(target_os = "linux")]
-mod early_signals {
+pub(crate) mod early_signals {
     /// What the early handler prints (one `write`, async-signal-safe).
     const MESSAGE: &[u8] = b"\nmfm: interrupted while starting; nothing was written\n";
 
@@ -115,7 +115,8 @@ mod early_signals {
         }
     }
 
-    extern "C" fn install() {
+    /// Installs the early handler for SIGINT, SIGTERM and SIGHUP.
+    pub(crate) fn install() {
         // SAFETY: a zeroed sigaction with a handler and an empty mask is
         // valid; nothing else runs yet in this process.
         unsafe {
@@ -127,8 +128,4 @@ mod early_signals {
             }
         }
     }
-
-    #[used]
-    #[unsafe(link_section = ".preinit_array")]
-    static INSTALL: extern "C" fn() = install;
 }

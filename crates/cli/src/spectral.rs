@@ -9,7 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use mfm_geometry::operators::Operators;
 use mfm_noise::spectrum::{MeshSpectrum, SpectrumFile, SpectrumRequest};
 use mfm_noise::stream;
-use mfm_noise::{KindName, NoiseError, NoiseKind, NoiseSampler};
+use mfm_noise::{KindName, KindParameters, NoiseError, NoiseKind, NoiseSampler};
 use mfm_render::plots::{self, HistogramPanel, VarianceSeries};
 use mfm_render::{ColorRange, Colormap, RenderOptions, render_mesh, save_png};
 use std::path::{Path, PathBuf};
@@ -59,11 +59,13 @@ impl EigsArgs {
 #[derive(Args, Clone, Debug)]
 pub struct KindArgs {
     /// Noise, as for `mfm train --noise`: matern or matern:TAU,
-    /// matern-normalized:C, white, naive, explicit:K or explicit:K:TAU.
-    #[arg(long, conflicts_with_all = ["kind", "tau", "c", "k_noise"])]
+    /// matern-normalized:C, matern-smooth[:TAU[:P]], white, naive,
+    /// explicit:K or explicit:K:TAU.
+    #[arg(long, conflicts_with_all = ["kind", "tau", "c", "k_noise", "order"])]
     pub noise: Option<NoiseKind>,
     /// Noise kind, the long form of --noise: matern (uses --tau),
-    /// matern-normalized (--c), white, naive or explicit (--k-noise, --tau).
+    /// matern-normalized (--c), matern-smooth (--tau, --order), white, naive
+    /// or explicit (--k-noise, --tau).
     #[arg(long, default_value = "matern")]
     pub kind: KindName,
     /// Screening weight of matern and explicit (1/length^2; default 100; 0 = no screening).
@@ -75,6 +77,9 @@ pub struct KindArgs {
     /// Number of eigenpairs of explicit noise (default 64).
     #[arg(long = "k-noise", value_name = "K")]
     pub k_noise: Option<usize>,
+    /// Order of matern-smooth noise: solves per sample, 2 to 4 (default 2).
+    #[arg(long)]
+    pub order: Option<u32>,
 }
 
 impl KindArgs {
@@ -85,7 +90,13 @@ impl KindArgs {
         if let Some(kind) = self.noise {
             return Ok(kind);
         }
-        NoiseKind::from_parts(self.kind, self.tau, self.c, self.k_noise).map_err(|e| match e {
+        let parameters = KindParameters {
+            tau: self.tau,
+            c: self.c,
+            k: self.k_noise,
+            order: self.order,
+        };
+        NoiseKind::from_parts(self.kind, parameters).map_err(|e| match e {
             NoiseError::UnusedParameter {
                 kind,
                 parameter,

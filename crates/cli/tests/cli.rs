@@ -1201,3 +1201,46 @@ fn the_shipped_pretrained_model_loads_and_samples() {
     let flow = std::fs::read_to_string(run.join("flow.json")).unwrap();
     assert!(flow.contains("\"centered\": true"), "{flow}");
 }
+
+/// libtorch's OpenMP workers spin briefly by default (`GOMP_SPINCOUNT`
+/// set before libtorch loads), and a user's own setting wins.
+#[test]
+#[cfg(all(feature = "network", target_os = "linux"))]
+fn openmp_workers_spin_briefly_unless_the_user_chose() {
+    let bench = |env: &[(&str, &str)]| {
+        let mut c = Command::new(env!("CARGO_BIN_EXE_mfm"));
+        c.args([
+            "net",
+            "bench",
+            "builtin:icosphere:1",
+            "--steps",
+            "1",
+            "--warmup",
+            "0",
+            "--inference",
+            "0",
+            "--threads",
+            "1",
+        ])
+        .env_remove("GOMP_SPINCOUNT")
+        .env_remove("OMP_WAIT_POLICY");
+        for (k, v) in env {
+            c.env(k, v);
+        }
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let text = bench(&[]);
+    assert!(
+        text.contains("OpenMP workers wait with GOMP_SPINCOUNT=1000 (mfm's default)"),
+        "{text}"
+    );
+    let text = bench(&[("GOMP_SPINCOUNT", "50000")]);
+    assert!(text.contains("wait with GOMP_SPINCOUNT=50000\n"), "{text}");
+    let text = bench(&[("OMP_WAIT_POLICY", "ACTIVE")]);
+    assert!(
+        text.contains("wait with OMP_WAIT_POLICY=ACTIVE\n"),
+        "{text}"
+    );
+}

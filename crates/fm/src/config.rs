@@ -342,7 +342,8 @@ impl<'de> Deserialize<'de> for NoiseScale {
 #[serde(default, deny_unknown_fields)]
 pub struct NoiseConfig {
     /// The noise kind, in [`NoiseKind`]'s command-line form (`matern:100`,
-    /// `matern-normalized:0.5`, `white`, `naive`, `explicit:64:100`).
+    /// `matern-normalized:0.5`, `matern-smooth:100:2`, `white`, `naive`,
+    /// `explicit:64:100`).
     ///
     /// Default `matern:100`, the paper's `tau = 100` (used for all its
     /// experiments). `tau` has units of 1 / length²: the noise is smooth

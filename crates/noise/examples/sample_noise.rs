@@ -5,7 +5,8 @@
 //! cargo run --release -p mfm-noise --example sample_noise -- [MESH] [options]
 //!
 //!   MESH               OBJ/OFF/PLY/glTF file (default: a built-in icosphere, 10242 vertices)
-//!   --kind KIND        naive | white | matern[:TAU] | matern-normalized:C | explicit:K[:TAU]
+//!   --kind KIND        naive | white | matern[:TAU] | matern-normalized:C |
+//!                      matern-smooth[:TAU[:P]] | explicit:K[:TAU]
 //!                      (default matern:100)
 //!   --samples N        number of samples (default 4)
 //!   --channels C       channels per sample (default 1)

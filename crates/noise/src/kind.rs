@@ -26,6 +26,15 @@ pub const DEFAULT_NORMALIZED_C: f64 = 1e-4;
 /// form ([`NoiseKind::from_parts`]).
 pub const DEFAULT_EXPLICIT_K: usize = 64;
 
+/// Default order `p` of [`NoiseKind::MaternSmooth`] (two solves per
+/// sample, Matérn smoothness `nu = 3` on a surface).
+pub const DEFAULT_SMOOTH_ORDER: u32 = 2;
+
+/// The largest order `p` of [`NoiseKind::MaternSmooth`] taken: each order
+/// is one more solve per sample, and beyond 4 the noise keeps almost
+/// nothing but its few lowest frequencies.
+pub const MAX_SMOOTH_ORDER: u32 = 4;
+
 /// A noise kind's name without its parameters: the first word of the
 /// short form, and the `--kind` value of the long form.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -38,15 +47,18 @@ pub enum KindName {
     Matern,
     /// [`NoiseKind::MaternNormalized`].
     MaternNormalized,
+    /// [`NoiseKind::MaternSmooth`].
+    MaternSmooth,
     /// [`NoiseKind::Explicit`].
     Explicit,
 }
 
 impl KindName {
     /// Every name, in the order the docs list them.
-    pub const ALL: [Self; 5] = [
+    pub const ALL: [Self; 6] = [
         Self::Matern,
         Self::MaternNormalized,
+        Self::MaternSmooth,
         Self::White,
         Self::Naive,
         Self::Explicit,
@@ -59,6 +71,7 @@ impl KindName {
             Self::White => "white",
             Self::Matern => "matern",
             Self::MaternNormalized => "matern-normalized",
+            Self::MaternSmooth => "matern-smooth",
             Self::Explicit => "explicit",
         }
     }
@@ -93,6 +106,7 @@ impl FromStr for KindName {
 /// | [`Matern`](Self::Matern) | solve `(L + tau M) f = M^1/2 n` | `1 / (lambda_i + tau)^2` |
 /// | [`Matern`](Self::Matern), `tau = 0` | `f = L^+ P M^1/2 n` (pseudo-inverse, mean-free per component) | `1 / lambda_i^2`, `0` for the zero modes |
 /// | [`MaternNormalized`](Self::MaternNormalized) | `sqrt(Gamma) f`, `f` Matérn with `tau = c Gamma` | `Gamma / (lambda_i + c Gamma)^2` |
+/// | [`MaternSmooth`](Self::MaternSmooth) `(tau, p)` | `f = (tau K^-1 M)^(p-1) K^-1 M^1/2 n`, `K = L + tau M` | `tau^(2p-2) / (lambda_i + tau)^(2p)` |
 /// | [`Explicit`](Self::Explicit) | `sum_{i<k} chi_i / (lambda_i + tau) phi_i`, `chi ~ N(0, I_k)` | `1 / (lambda_i + tau)^2` for `i < k`, else `0` |
 ///
 /// Serialized (serde) with an internal `kind` tag in snake case, e.g.
@@ -106,7 +120,8 @@ impl FromStr for KindName {
 /// It also parses from and prints to a short command-line form (see
 /// [`FromStr`](#impl-FromStr-for-NoiseKind)): `naive`, `white`,
 /// `matern[:TAU]`, `matern-normalized:C` (alias `normalized:C`),
-/// `explicit:K[:TAU]`; `TAU` defaults to [`DEFAULT_TAU`].
+/// `matern-smooth[:TAU[:P]]`, `explicit:K[:TAU]`; `TAU` defaults to
+/// [`DEFAULT_TAU`], `P` to [`DEFAULT_SMOOTH_ORDER`].
 ///
 /// # Example
 /// ```
@@ -148,6 +163,27 @@ pub enum NoiseKind {
         /// Dimensionless screening factor, `> 0`.
         c: f64,
     },
+    /// Smoother Matérn noise: the SPDE of [`Matern`](Self::Matern) with
+    /// the operator to the power `p`, `(L + tau M)^p` in the sense of the
+    /// generalized eigenproblem, i.e. `p` screened Poisson solves per
+    /// sample with the one factor of `K = L + tau M`:
+    /// `f = (tau K^-1 M)^(p-1) K^-1 M^1/2 n`. Spectrally
+    /// `Var(c_i) = tau^(2p-2) / (lambda_i + tau)^(2p)`: the factor
+    /// `tau^(p-1)` keeps the frequencies well below `tau` at the variance
+    /// `1 / tau^2` of [`Matern`](Self::Matern) noise of the same `tau`,
+    /// while the high frequencies fall as `lambda^-2p` instead of
+    /// `lambda^-2`. On a surface this is Matérn smoothness `nu = 2p - 1`;
+    /// with `p >= 2` a sample's bending energy (`sum lambda_i^2 Var(c_i)`)
+    /// stays bounded as the mesh is refined, where that of
+    /// [`Matern`](Self::Matern) noise grows with the vertex count: the
+    /// noise to train on when samples are drawn on meshes much finer than
+    /// the training mesh.
+    MaternSmooth {
+        /// Screening weight, `> 0`.
+        tau: f64,
+        /// Order `p`: solves per sample, `2 ..= `[`MAX_SMOOTH_ORDER`].
+        order: u32,
+    },
     /// The Matérn spectrum truncated to the `k` lowest eigenpairs, sampled
     /// explicitly in the eigenbasis. With `tau = 0` the zero eigenvalues
     /// (constant per connected component) are left out instead of dividing
@@ -185,6 +221,20 @@ impl NoiseKind {
             Self::MaternNormalized { c } if !(c.is_finite() && c > 0.0) => {
                 bad("c", "a finite value > 0", c)
             }
+            Self::MaternSmooth { tau, .. } if !(tau.is_finite() && tau > 0.0 && tau <= MAX_TAU) => {
+                bad(
+                    "tau",
+                    "in (0, 1e10] (smooth Matérn noise needs screening; the paper's Matérn uses 100)",
+                    tau,
+                )
+            }
+            Self::MaternSmooth { order, .. } if !(2..=MAX_SMOOTH_ORDER).contains(&order) => {
+                Err(NoiseError::InvalidParameter {
+                    name: "order",
+                    expected: "2, 3 or 4 (solves per sample; order 1 is plain Matérn noise, matern:TAU)",
+                    found: order.to_string(),
+                })
+            }
             Self::Explicit { k: 0, .. } => Err(NoiseError::InvalidParameter {
                 name: "k",
                 expected: "at least 1 eigenpair",
@@ -210,6 +260,7 @@ impl NoiseKind {
             Self::White => KindName::White,
             Self::Matern { .. } => KindName::Matern,
             Self::MaternNormalized { .. } => KindName::MaternNormalized,
+            Self::MaternSmooth { .. } => KindName::MaternSmooth,
             Self::Explicit { .. } => KindName::Explicit,
         }
     }
@@ -217,8 +268,9 @@ impl NoiseKind {
     /// The long form of a kind: its name and its parameters one by one
     /// (`--kind matern --tau 100` on the command line, the same kind as
     /// `matern:100`). A parameter left out takes its default
-    /// ([`DEFAULT_TAU`], [`DEFAULT_NORMALIZED_C`], [`DEFAULT_EXPLICIT_K`]);
-    /// the result is [validated](NoiseKind::validate).
+    /// ([`DEFAULT_TAU`], [`DEFAULT_NORMALIZED_C`], [`DEFAULT_EXPLICIT_K`],
+    /// [`DEFAULT_SMOOTH_ORDER`]); the result is
+    /// [validated](NoiseKind::validate).
     ///
     /// # Errors
     /// [`NoiseError::UnusedParameter`] for a parameter the kind does not
@@ -227,17 +279,16 @@ impl NoiseKind {
     ///
     /// # Example
     /// ```
-    /// use mfm_noise::kind::{KindName, NoiseKind};
-    /// let long = NoiseKind::from_parts(KindName::Matern, Some(30.0), None, None).unwrap();
+    /// use mfm_noise::kind::{KindName, KindParameters, NoiseKind};
+    /// let tau = KindParameters { tau: Some(30.0), ..Default::default() };
+    /// let long = NoiseKind::from_parts(KindName::Matern, tau).unwrap();
     /// assert_eq!(long, "matern:30".parse().unwrap());
-    /// assert!(NoiseKind::from_parts(KindName::White, Some(30.0), None, None).is_err());
+    /// assert!(NoiseKind::from_parts(KindName::White, tau).is_err());
+    /// let smooth = NoiseKind::from_parts(KindName::MaternSmooth, tau).unwrap();
+    /// assert_eq!(smooth, NoiseKind::MaternSmooth { tau: 30.0, order: 2 });
     /// ```
-    pub fn from_parts(
-        name: KindName,
-        tau: Option<f64>,
-        c: Option<f64>,
-        k: Option<usize>,
-    ) -> Result<Self> {
+    pub fn from_parts(name: KindName, parameters: KindParameters) -> Result<Self> {
+        let KindParameters { tau, c, k, order } = parameters;
         let kind = name.as_str();
         let refuse = |parameter: &'static str, hint: &'static str| {
             Err(NoiseError::UnusedParameter {
@@ -246,11 +297,12 @@ impl NoiseKind {
                 hint,
             })
         };
-        let (takes_tau, takes_c, takes_k) = match name {
-            KindName::Naive | KindName::White => (false, false, false),
-            KindName::Matern => (true, false, false),
-            KindName::MaternNormalized => (false, true, false),
-            KindName::Explicit => (true, false, true),
+        let (takes_tau, takes_c, takes_k, takes_order) = match name {
+            KindName::Naive | KindName::White => (false, false, false, false),
+            KindName::Matern => (true, false, false, false),
+            KindName::MaternNormalized => (false, true, false, false),
+            KindName::MaternSmooth => (true, false, false, true),
+            KindName::Explicit => (true, false, true, false),
         };
         if tau.is_some() && !takes_tau {
             let hint = if name == KindName::MaternNormalized {
@@ -266,6 +318,14 @@ impl NoiseKind {
         if k.is_some() && !takes_k {
             return refuse("k", "");
         }
+        if order.is_some() && !takes_order {
+            let hint = if name == KindName::Matern {
+                " (plain Matérn noise is order 1; matern-smooth takes an order)"
+            } else {
+                ""
+            };
+            return refuse("order", hint);
+        }
         let tau = tau.unwrap_or(DEFAULT_TAU);
         let out = match name {
             KindName::Naive => Self::Naive,
@@ -273,6 +333,10 @@ impl NoiseKind {
             KindName::Matern => Self::Matern { tau },
             KindName::MaternNormalized => Self::MaternNormalized {
                 c: c.unwrap_or(DEFAULT_NORMALIZED_C),
+            },
+            KindName::MaternSmooth => Self::MaternSmooth {
+                tau,
+                order: order.unwrap_or(DEFAULT_SMOOTH_ORDER),
             },
             KindName::Explicit => Self::Explicit {
                 k: k.unwrap_or(DEFAULT_EXPLICIT_K),
@@ -284,6 +348,20 @@ impl NoiseKind {
     }
 }
 
+/// The parameters of a kind's long form ([`NoiseKind::from_parts`]), each
+/// `None` when not given.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct KindParameters {
+    /// Screening weight (`matern`, `matern-smooth`, `explicit`).
+    pub tau: Option<f64>,
+    /// Screening factor of `matern-normalized`.
+    pub c: Option<f64>,
+    /// Eigenpairs of `explicit`.
+    pub k: Option<usize>,
+    /// Order of `matern-smooth`.
+    pub order: Option<u32>,
+}
+
 impl fmt::Display for NoiseKind {
     /// The command-line form, which [`FromStr`] reads back.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -291,20 +369,24 @@ impl fmt::Display for NoiseKind {
             Self::Naive | Self::White => f.write_str(self.name()),
             Self::Matern { tau } => write!(f, "matern:{}", fmt_f64(*tau)),
             Self::MaternNormalized { c } => write!(f, "matern-normalized:{}", fmt_f64(*c)),
+            Self::MaternSmooth { tau, order } => {
+                write!(f, "matern-smooth:{}:{order}", fmt_f64(*tau))
+            }
             Self::Explicit { k, tau } => write!(f, "explicit:{k}:{}", fmt_f64(*tau)),
         }
     }
 }
 
-const FORMS: &str =
-    "expected naive, white, matern[:TAU], matern-normalized:C (or normalized:C), explicit:K[:TAU]";
+const FORMS: &str = "expected naive, white, matern[:TAU], matern-normalized:C (or normalized:C), \
+                     matern-smooth[:TAU[:P]], explicit:K[:TAU]";
 
 impl FromStr for NoiseKind {
     type Err = NoiseError;
 
     /// Parses `naive`, `white`, `matern[:TAU]`, `matern-normalized:C` (or
-    /// `normalized:C`), `explicit:K[:TAU]` (case-insensitive names; `TAU`
-    /// defaults to [`DEFAULT_TAU`]), then [validates](NoiseKind::validate).
+    /// `normalized:C`), `matern-smooth[:TAU[:P]]`, `explicit:K[:TAU]`
+    /// (case-insensitive names; `TAU` defaults to [`DEFAULT_TAU`], `P` to
+    /// [`DEFAULT_SMOOTH_ORDER`]), then [validates](NoiseKind::validate).
     fn from_str(s: &str) -> Result<Self> {
         let err = |reason: String| NoiseError::ParseKind {
             input: s.to_owned(),
@@ -344,6 +426,21 @@ impl FromStr for NoiseKind {
                     DEFAULT_TAU
                 };
                 Self::Matern { tau }
+            }
+            "matern-smooth" | "matern_smooth" => {
+                arity(0, 2)?;
+                let tau = if parts.len() > 1 {
+                    num(1, "tau")?
+                } else {
+                    DEFAULT_TAU
+                };
+                let order = match parts.get(2) {
+                    Some(p) => p
+                        .parse::<u32>()
+                        .map_err(|e| err(format!("order {p:?} is not a whole number ({e})")))?,
+                    None => DEFAULT_SMOOTH_ORDER,
+                };
+                Self::MaternSmooth { tau, order }
             }
             "matern-normalized" | "matern_normalized" | "normalized" => {
                 arity(1, 1)?;

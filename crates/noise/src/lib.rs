@@ -53,6 +53,6 @@ pub mod spectrum;
 pub mod stream;
 
 pub use error::{NoiseError, Result};
-pub use kind::{DEFAULT_TAU, KindName, NoiseKind};
+pub use kind::{DEFAULT_TAU, KindName, KindParameters, NoiseKind};
 pub use sampler::{NoiseBatch, NoiseSampler};
 pub use spectrum::{SpectralAnalyzer, SpectrumComparison, SpectrumReport, Theory};

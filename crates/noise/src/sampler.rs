@@ -239,11 +239,14 @@ enum Engine {
     Diagonal(Option<Vec<f64>>),
     /// `x = (L + tau M)^-1 M^1/2 n`, times an amplitude. With `tau = 0`,
     /// `L + eps M` is factored and `null_space` holds the components whose
-    /// constants are projected out before and after the solve.
+    /// constants are projected out before and after the solve. Each of the
+    /// `repeats` further solves (smooth Matérn) first multiplies `x` by
+    /// `tau M`: `x <- (L + tau M)^-1 tau M x`.
     Poisson {
         poisson: ScreenedPoisson,
         sqrt_mass: Vec<f64>,
         null_space: Option<Components>,
+        repeats: u32,
     },
     /// `x = sum_i weight_i chi_i phi_i`.
     Explicit {
@@ -490,10 +493,13 @@ impl NoiseSampler {
                         poisson: screened(eps)?,
                         sqrt_mass: sqrt_mass(),
                         null_space: Some(Components::new(l, mass)),
+                        repeats: 0,
                     },
                 )
             }
-            NoiseKind::Matern { tau } if tau < ZERO_TAU_REGULARIZATION * gamma => {
+            NoiseKind::Matern { tau } | NoiseKind::MaternSmooth { tau, .. }
+                if tau < ZERO_TAU_REGULARIZATION * gamma =>
+            {
                 return Err(NoiseError::InvalidParameter {
                     name: "tau",
                     expected: "0 (no screening) or at least 1e-10 x Gamma, the smallest \
@@ -513,6 +519,17 @@ impl NoiseSampler {
                     poisson: screened(tau)?,
                     sqrt_mass: sqrt_mass(),
                     null_space: None,
+                    repeats: 0,
+                },
+            ),
+            NoiseKind::MaternSmooth { tau, order } => (
+                Some(tau),
+                1.0,
+                Engine::Poisson {
+                    poisson: screened(tau)?,
+                    sqrt_mass: sqrt_mass(),
+                    null_space: None,
+                    repeats: order - 1,
                 },
             ),
             NoiseKind::MaternNormalized { c } => {
@@ -539,6 +556,7 @@ impl NoiseSampler {
                         poisson: screened(tau)?,
                         sqrt_mass: sqrt_mass(),
                         null_space: None,
+                        repeats: 0,
                     },
                 )
             }
@@ -780,9 +798,27 @@ impl NoiseSampler {
                     col.iter_mut().zip(s).for_each(|(x, s)| *x *= s);
                 }
             });
-            if let Engine::Poisson { poisson, .. } = &self.engine {
+            if let Engine::Poisson {
+                poisson, repeats, ..
+            } = &self.engine
+            {
                 poisson
                     .solve_many_f32_in_place(MatMut::from_column_major_slice_mut(block, v, cols))?;
+                if *repeats > 0 {
+                    let tau_mass: Vec<f32> = self
+                        .mass
+                        .iter()
+                        .map(|m| (poisson.tau() * m) as f32)
+                        .collect();
+                    for _ in 0..*repeats {
+                        block.par_chunks_mut(v).for_each(|col| {
+                            col.iter_mut().zip(&tau_mass).for_each(|(x, s)| *x *= s)
+                        });
+                        poisson.solve_many_f32_in_place(MatMut::from_column_major_slice_mut(
+                            block, v, cols,
+                        ))?;
+                    }
+                }
             }
             if channels > 1 {
                 scatter(&scratch[..out.len()], out, v, channels, 1.0);
@@ -820,11 +856,21 @@ impl NoiseSampler {
         if let Engine::Poisson {
             poisson,
             null_space,
+            repeats,
             ..
         } = &self.engine
         {
             let v = self.num_vertices();
             poisson.solve_many_in_place(MatMut::from_column_major_slice_mut(block, v, cols))?;
+            for _ in 0..*repeats {
+                let tau = poisson.tau();
+                block.par_chunks_mut(v).for_each(|col| {
+                    col.iter_mut()
+                        .zip(&self.mass)
+                        .for_each(|(x, m)| *x *= tau * m)
+                });
+                poisson.solve_many_in_place(MatMut::from_column_major_slice_mut(block, v, cols))?;
+            }
             if let (Some(components), true) = (null_space, v > 0) {
                 block
                     .par_chunks_mut(v)

@@ -144,6 +144,7 @@ impl NoiseSampler {
 ///   `1 / lambda_i^2` and `0` for the zero modes (eigenvalues at or below
 ///   `1e-8` times the largest one in `pairs`, as for the explicit kind);
 /// - normalized Matérn: `Gamma / (lambda_i + c Gamma)^2`;
+/// - smooth Matérn `(tau, p)`: `tau^(2p-2) / (lambda_i + tau)^(2p)`;
 /// - explicit `(k, tau)`: `1 / (lambda_i + tau)^2` for `i < k` (`0` for the
 ///   zero modes when `tau == 0`), `0` for `i >= k`.
 ///
@@ -182,6 +183,13 @@ pub fn theoretical_variance(
             .iter()
             .map(|l| gamma / (l + c * gamma).powi(2))
             .collect(),
+        NoiseKind::MaternSmooth { tau, order } => {
+            let p = order as i32;
+            values
+                .iter()
+                .map(|l| tau.powi(2 * p - 2) / (l + tau).powi(2 * p))
+                .collect()
+        }
         NoiseKind::Explicit { k, tau } => {
             let kk = k.min(values.len());
             let mut v: Vec<f64> = explicit_weights(&values[..kk], tau)

@@ -10,7 +10,9 @@ use faer::sparse::SparseColMat;
 use mfm_geometry::TriMesh;
 use mfm_geometry::operators::Operators;
 use mfm_noise::spectrum::{self, SpectralAnalyzer};
-use mfm_noise::{KindName, NoiseBatch, NoiseError, NoiseKind, NoiseSampler, SpectrumReport};
+use mfm_noise::{
+    KindName, KindParameters, NoiseBatch, NoiseError, NoiseKind, NoiseSampler, SpectrumReport,
+};
 use proptest::prelude::*;
 
 /// `y = L x` from the CSC arrays (both triangles are stored).
@@ -280,9 +282,14 @@ fn any_kind() -> impl Strategy<Value = NoiseKind> {
         Just(NoiseKind::White),
         prop_oneof![Just(0.0), 1e-6f64..1e6].prop_map(|tau| NoiseKind::Matern { tau }),
         (1e-9f64..1e3).prop_map(|c| NoiseKind::MaternNormalized { c }),
+        (1e-6f64..1e6, 2u32..=4).prop_map(|(tau, order)| NoiseKind::MaternSmooth { tau, order }),
         (1usize..5000, prop_oneof![Just(0.0), 1e-6f64..1e6])
             .prop_map(|(k, tau)| NoiseKind::Explicit { k, tau }),
     ]
+}
+
+fn parts(tau: Option<f64>, c: Option<f64>, k: Option<usize>, order: Option<u32>) -> KindParameters {
+    KindParameters { tau, c, k, order }
 }
 
 proptest! {
@@ -298,28 +305,37 @@ proptest! {
     #[test]
     fn the_long_form_gives_the_same_kind(kind in any_kind()) {
         // every parameter spelled out
-        let (tau, c, k) = match kind {
-            NoiseKind::Naive | NoiseKind::White => (None, None, None),
-            NoiseKind::Matern { tau } => (Some(tau), None, None),
-            NoiseKind::MaternNormalized { c } => (None, Some(c), None),
-            NoiseKind::Explicit { k, tau } => (Some(tau), None, Some(k)),
+        let (tau, c, k, order) = match kind {
+            NoiseKind::Naive | NoiseKind::White => (None, None, None, None),
+            NoiseKind::Matern { tau } => (Some(tau), None, None, None),
+            NoiseKind::MaternNormalized { c } => (None, Some(c), None, None),
+            NoiseKind::MaternSmooth { tau, order } => (Some(tau), None, None, Some(order)),
+            NoiseKind::Explicit { k, tau } => (Some(tau), None, Some(k), None),
         };
-        prop_assert_eq!(NoiseKind::from_parts(kind.kind_name(), tau, c, k).unwrap(), kind);
+        prop_assert_eq!(NoiseKind::from_parts(kind.kind_name(), parts(tau, c, k, order)).unwrap(), kind);
         // and every parameter the kind does not take refused by name
-        for (p, given) in [("tau", tau), ("c", c), ("k", k.map(|k| k as f64))] {
-            if given.is_some() {
+        let given = [
+            ("tau", tau.is_some()),
+            ("c", c.is_some()),
+            ("k", k.is_some()),
+            ("order", order.is_some()),
+        ];
+        for (p, given) in given {
+            if given {
                 continue;
             }
             let e = match p {
-                "tau" => NoiseKind::from_parts(kind.kind_name(), Some(1.0), c, k),
-                "c" => NoiseKind::from_parts(kind.kind_name(), tau, Some(1.0), k),
-                _ => NoiseKind::from_parts(kind.kind_name(), tau, c, Some(3)),
+                "tau" => NoiseKind::from_parts(kind.kind_name(), parts(Some(1.0), c, k, order)),
+                "c" => NoiseKind::from_parts(kind.kind_name(), parts(tau, Some(1.0), k, order)),
+                "k" => NoiseKind::from_parts(kind.kind_name(), parts(tau, c, Some(3), order)),
+                _ => NoiseKind::from_parts(kind.kind_name(), parts(tau, c, k, Some(3))),
             };
             let accepted = match (p, kind.kind_name()) {
                 // parameters left at their defaults are accepted when given
-                ("tau", KindName::Matern | KindName::Explicit) => true,
+                ("tau", KindName::Matern | KindName::Explicit | KindName::MaternSmooth) => true,
                 ("c", KindName::MaternNormalized) => true,
                 ("k", KindName::Explicit) => true,
+                ("order", KindName::MaternSmooth) => true,
                 _ => false,
             };
             prop_assert_eq!(e.is_ok(), accepted, "{} given to {}", p, kind);
@@ -335,27 +351,71 @@ proptest! {
 
 #[test]
 fn the_long_form_fills_in_defaults_and_validates() {
-    let d = |name| NoiseKind::from_parts(name, None, None, None).unwrap();
+    let d = |name| NoiseKind::from_parts(name, KindParameters::default()).unwrap();
     assert_eq!(d(KindName::Matern), "matern".parse().unwrap());
     assert_eq!(d(KindName::Explicit), "explicit:64".parse().unwrap());
     assert_eq!(
         d(KindName::MaternNormalized),
         NoiseKind::MaternNormalized { c: 1e-4 }
     );
-    let e = NoiseKind::from_parts(KindName::Matern, Some(-1.0), None, None).unwrap_err();
+    assert_eq!(
+        d(KindName::MaternSmooth),
+        NoiseKind::MaternSmooth {
+            tau: 100.0,
+            order: 2
+        }
+    );
+    assert_eq!(d(KindName::MaternSmooth), "matern-smooth".parse().unwrap());
+    assert_eq!(
+        d(KindName::MaternSmooth),
+        "matern-smooth:100".parse().unwrap()
+    );
+    let e =
+        NoiseKind::from_parts(KindName::Matern, parts(Some(-1.0), None, None, None)).unwrap_err();
     assert!(
         matches!(e, NoiseError::InvalidParameter { name: "tau", .. }),
         "{e}"
     );
-    let e = NoiseKind::from_parts(KindName::MaternNormalized, Some(5.0), None, None).unwrap_err();
+    let e = NoiseKind::from_parts(
+        KindName::MaternNormalized,
+        parts(Some(5.0), None, None, None),
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("give c"), "{e}");
+    let e = NoiseKind::from_parts(KindName::Matern, parts(None, None, None, Some(2))).unwrap_err();
+    assert!(e.to_string().contains("matern-smooth"), "{e}");
+    // smooth Matérn needs screening and an order in 2..=4
+    for bad in [
+        "matern-smooth:0",
+        "matern-smooth:100:1",
+        "matern-smooth:100:5",
+        "matern-smooth:1:2:3",
+    ] {
+        let e = bad.parse::<NoiseKind>().unwrap_err();
+        assert!(
+            e.to_string().contains("tau")
+                || e.to_string().contains("order")
+                || e.to_string().contains("parameters"),
+            "{bad}: {e}"
+        );
+    }
+    let e = "matern-smooth:100:1".parse::<NoiseKind>().unwrap_err();
+    assert!(
+        matches!(e, NoiseError::InvalidParameter { name: "order", .. }),
+        "{e}"
+    );
+    let e = "matern-smooth:0".parse::<NoiseKind>().unwrap_err();
+    assert!(
+        matches!(e, NoiseError::InvalidParameter { name: "tau", .. }),
+        "{e}"
+    );
 }
 
 #[test]
 fn kind_names_parse_as_the_short_form_writes_them() {
     for name in KindName::ALL {
         assert_eq!(name.as_str().parse::<KindName>().unwrap(), name);
-        let kind = NoiseKind::from_parts(name, None, None, None).unwrap();
+        let kind = NoiseKind::from_parts(name, KindParameters::default()).unwrap();
         assert_eq!(kind.kind_name(), name);
     }
     let e = "Matern".parse::<KindName>().unwrap_err();

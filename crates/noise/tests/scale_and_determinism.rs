@@ -184,6 +184,31 @@ fn f32_samples_solve_their_equations_with_f32_normals() {
             }
         }
     }
+    // smooth Matérn of order 2 is one more solve of the Matérn sample of
+    // the same normals: (L + tau M) f_2 = tau M f_1, in f32 and in f64
+    let smooth = NoiseSampler::new(&mesh, NoiseKind::MaternSmooth { tau, order: 2 }).unwrap();
+    let matern64 = matern.sample(ns, ch, seed).unwrap();
+    let smooth64 = smooth.sample(ns, ch, seed).unwrap();
+    let smooth32 = smooth.sample_f32(ns, ch, seed).unwrap();
+    for s in 0..ns {
+        for c in 0..ch {
+            let to64 = |x: &[f32]| x.iter().map(|&x| f64::from(x)).collect::<Vec<f64>>();
+            let cases = [
+                (to64(&smooth32.signal(s, c)), to64(&a.signal(s, c)), 1e-5),
+                (smooth64.signal(s, c), matern64.signal(s, c), 1e-11),
+            ];
+            for (f2, f1, tolerance) in cases {
+                let rhs: Vec<f64> = f1.iter().zip(m).map(|(f, m)| tau * m * f).collect();
+                let rn = rhs.iter().map(|x| x * x).sum::<f64>().sqrt();
+                let lf = matvec(l, &f2);
+                let r = (0..f2.len())
+                    .map(|v| (lf[v] + tau * m[v] * f2[v] - rhs[v]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                assert!(r < tolerance * rn, "smooth: relative residual {}", r / rn);
+            }
+        }
+    }
     let explicit = NoiseSampler::new(&mesh, NoiseKind::Explicit { k: 10, tau: 2.0 }).unwrap();
     assert_eq!(
         explicit.sample_f32(5, 2, 8).unwrap(),
@@ -210,6 +235,10 @@ fn f32_samples_are_bit_identical_across_thread_counts_and_batch_cuts() {
         NoiseKind::Matern { tau: 100.0 },
         NoiseKind::Matern { tau: 0.0 },
         NoiseKind::MaternNormalized { c: 0.01 },
+        NoiseKind::MaternSmooth {
+            tau: 100.0,
+            order: 3,
+        },
         NoiseKind::White,
         NoiseKind::Naive,
     ] {

@@ -74,8 +74,8 @@ fn assert_independent(name: &str, kind: NoiseKind, r: &SpectrumReport) {
     );
 }
 
-/// Matérn, normalized Matérn and white noise against their closed forms,
-/// independence for all three; naive against `phi^T M^2 phi`.
+/// Matérn, normalized Matérn, smooth Matérn and white noise against their
+/// closed forms, independence for all four; naive against `phi^T M^2 phi`.
 fn check_mesh(name: &str, mesh: &TriMesh) {
     let (mass, pairs) = common::eigen(mesh, FREQUENCIES);
     let kinds = [
@@ -84,6 +84,20 @@ fn check_mesh(name: &str, mesh: &TriMesh) {
         (NoiseKind::MaternNormalized { c: 1e-5 }, 12),
         (NoiseKind::White, 13),
         (NoiseKind::Naive, 14),
+        (
+            NoiseKind::MaternSmooth {
+                tau: 100.0,
+                order: 2,
+            },
+            15,
+        ),
+        (
+            NoiseKind::MaternSmooth {
+                tau: 30.0,
+                order: 3,
+            },
+            16,
+        ),
     ];
     for (kind, seed) in kinds {
         let r = report(mesh, &mass, &pairs, kind, seed);

@@ -5,7 +5,7 @@ use crate::errors::{bad_argument, runtime_error, value_error};
 use crate::memory::require_memory;
 use mfm_geometry::TriMesh;
 use mfm_geometry::frame::CanonicalFrame;
-use mfm_noise::{KindName, NoiseError, NoiseKind, NoiseSampler};
+use mfm_noise::{KindName, KindParameters, NoiseError, NoiseKind, NoiseSampler};
 use numpy::ndarray::Array3;
 use numpy::{PyArray3, PyArrayDescrMethods};
 use pyo3::prelude::*;
@@ -79,7 +79,13 @@ pub fn parse_kind(
         .to_ascii_lowercase()
         .parse()
         .map_err(|e: NoiseError| bad_argument("kind", e))?;
-    NoiseKind::from_parts(name, tau, c, k_noise).map_err(|e| match e {
+    let parameters = KindParameters {
+        tau,
+        c,
+        k: k_noise,
+        order: None,
+    };
+    NoiseKind::from_parts(name, parameters).map_err(|e| match e {
         NoiseError::UnusedParameter { parameter, .. } => {
             let argument = if parameter == "k" {
                 "k_noise"
@@ -154,7 +160,8 @@ pub fn count(argument: &str, value: i64, min: i64) -> PyResult<usize> {
 /// frame="canonical", c=None, k_noise=None)`:
 /// - `kind`: `"matern"` (solve `(L + tau M) f = M^1/2 n`, `tau` default
 ///   100), `"matern-normalized"` (`c`, default 1e-4: `tau = c Gamma`,
-///   scaled by `sqrt(Gamma)`), `"white"`, `"naive"`, `"explicit"`
+///   scaled by `sqrt(Gamma)`), `"matern-smooth"` (`tau`; order 2, or
+///   the short form `"matern-smooth:100:3"`), `"white"`, `"naive"`, `"explicit"`
 ///   (`k_noise` eigenpairs, default 64, and `tau`); or the command line's
 ///   short form with the parameters inside, `"matern:50"`,
 ///   `"explicit:32:100"`, `"matern-normalized:1e-3"`.

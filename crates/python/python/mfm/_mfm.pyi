@@ -79,7 +79,8 @@ class MaternNoise:
     """Noise on a mesh, factored once, sampled many times.
 
     ``kind``: ``"matern"`` (``tau``, default 100), ``"matern-normalized"``
-    (``c``, default 1e-4), ``"white"``, ``"naive"``, ``"explicit"``
+    (``c``, default 1e-4), ``"matern-smooth"`` (``tau``; order 2, or the
+    short form ``"matern-smooth:100:3"``), ``"white"``, ``"naive"``, ``"explicit"``
     (``k_noise``, default 64, and ``tau``), or the command line's short form
     (``"matern:50"``, ``"explicit:32:100"``). ``frame="canonical"`` moves the
     mesh into the canonical frame first (as ``mfm train``); ``"as-is"`` uses
