@@ -24,7 +24,7 @@
 //! arguments, before any library initializer or any of mfm's code has run
 //! (it costs the dynamic loader's work once more, about 3 ms). A user's own
 //! `GOMP_SPINCOUNT` or `OMP_WAIT_POLICY` is left as it is
-//! (`OMP_WAIT_POLICY=ACTIVE` restores the spinning); child processes
+//! (`GOMP_SPINCOUNT=300000` restores libgomp's default); child processes
 //! inherit the setting.
 
 /// `GOMP_SPINCOUNT=` the default spin count, as put in the environment.

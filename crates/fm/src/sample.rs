@@ -123,6 +123,17 @@ pub struct SampleTiming {
 /// writing them.
 pub const SAMPLE_CHUNK_BYTES: usize = 64 << 20;
 
+/// The activation memory a batch of samples may take
+/// ([`Sampler::batch_on`]): 3 GiB.
+pub const SAMPLE_BATCH_BYTES: usize = 3 << 30;
+
+/// Bytes of activations one sample's network evaluation takes per face and
+/// channel of the network's width, measured: the `cpu-deform` network (W32
+/// K3) on 1.08M faces peaked at 4.98 GB with one sample and 9.14 GB with two
+/// (docs/BENCHMARKS.md, "Generation at a million faces"), 4.2 GB per
+/// sample, 120 bytes per face and channel; rounded up.
+pub const SAMPLE_BYTES_PER_FACE_CHANNEL: usize = 128;
+
 /// What [`Sampler::sample_to_npy`] draws.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SampleRequest {
@@ -206,6 +217,17 @@ impl TargetMesh {
     pub fn num_vertices(&self) -> usize {
         self.mesh.num_vertices()
     }
+}
+
+/// `batch`, or the most samples of a network of `width` channels on a mesh
+/// of `faces` faces that fit [`SAMPLE_BATCH_BYTES`] (at least 1): see
+/// [`Sampler::batch_on`].
+pub fn batch_within_memory(faces: usize, width: usize, batch: usize) -> usize {
+    let per_sample = faces
+        .saturating_mul(width.max(1))
+        .saturating_mul(SAMPLE_BYTES_PER_FACE_CHANNEL)
+        .max(1);
+    batch.min(SAMPLE_BATCH_BYTES / per_sample).max(1)
 }
 
 /// Vertex positions as an `f32` tensor `[1, V, 3]` on `device`.
@@ -485,8 +507,21 @@ impl Sampler {
         self.sample_on(&target, 0, count, seed, options)
     }
 
+    /// The batch the samples on `target` are integrated in: `batch`, or
+    /// fewer where that many would take more than [`SAMPLE_BATCH_BYTES`] of
+    /// activations ([`SAMPLE_BYTES_PER_FACE_CHANNEL`] per face and channel
+    /// of the network's width), at least 1. On a mesh of a million faces a
+    /// sample of a small network takes GBs, and batching it saves nothing:
+    /// the solves are as many per sample, and the factor is shared by every
+    /// batch of one call anyway. Sample `i` does not depend on its batch
+    /// (up to the round-off of differently blocked products).
+    pub fn batch_on(&self, target: &TargetMesh, batch: usize) -> usize {
+        batch_within_memory(target.mesh.num_faces(), self.net.config().width, batch)
+    }
+
     /// Generates samples `first .. first + count` of `seed` on a prepared
-    /// mesh, `options.batch` at a time.
+    /// mesh, `options.batch` at a time ([`Sampler::batch_on`] fewer on a
+    /// very fine mesh).
     ///
     /// # Errors
     /// [`FmError::Config`] for zero steps or batch; noise and network errors.
@@ -528,8 +563,9 @@ impl Sampler {
         let mut noise_seconds = 0.0;
         let mut data = Vec::with_capacity(count * v * c);
         let mut done = 0;
+        let batch = self.batch_on(target, options.batch);
         while done < count {
-            let b = options.batch.min(count - done);
+            let b = batch.min(count - done);
             let t0 = Instant::now();
             let x0 = self.noise(target, first + done, b, seed)?;
             noise_seconds += t0.elapsed().as_secs_f64();

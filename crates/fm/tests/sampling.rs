@@ -479,3 +479,27 @@ fn position_samples_come_back_in_the_datasets_units() {
     );
     assert!(w[1].contains("area"), "{w:?}");
 }
+
+#[test]
+fn batches_shrink_on_meshes_whose_activations_would_not_fit() {
+    use mfm_fm::sample::{SAMPLE_BATCH_BYTES, SAMPLE_BYTES_PER_FACE_CHANNEL, batch_within_memory};
+    // the horse template (16.8k faces) keeps the run's batch of 8
+    assert_eq!(batch_within_memory(16_843, 32, 8), 8);
+    // its 16x refinement: 269k faces x 32 channels x 128 bytes = 1.1 GB a sample
+    let fit = SAMPLE_BATCH_BYTES / (269_488 * 32 * SAMPLE_BYTES_PER_FACE_CHANNEL);
+    assert_eq!(fit, 2);
+    assert_eq!(batch_within_memory(269_488, 32, 8), fit);
+    // a million faces: one at a time, never zero
+    assert_eq!(batch_within_memory(1_077_952, 32, 8), 1);
+    assert_eq!(batch_within_memory(usize::MAX, usize::MAX, 8), 1);
+    assert_eq!(batch_within_memory(0, 0, 3), 3);
+    // the sampler uses it: a fine mesh is integrated one sample at a time
+    let mesh = procedural::icosphere(1);
+    let sampler = Sampler::new(
+        affine_velocity_net(0.8, 0.25),
+        flow(NoiseKind::Matern { tau: 10.0 }, 0.15),
+    )
+    .unwrap();
+    let target = sampler.prepare(&mesh).unwrap();
+    assert_eq!(sampler.batch_on(&target, 4), 4);
+}
