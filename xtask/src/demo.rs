@@ -12,10 +12,14 @@
 //! samples it the same way. Both are judged by the sample quality (bump fit
 //! against the data's floor, training signals beside samples on one colour
 //! scale) next to the distribution metrics, side by side; plus Matérn vs
-//! naive noise and the noise spectrum on the two triangulations. Writes a
-//! Markdown report linking everything.
+//! naive noise and the noise spectrum on the two triangulations. Last, the
+//! shipped shape model (`fixtures/pretrained/elephant/`, `cargo xtask
+//! pretrain elephant`) samples elephant poses on its training mesh and the
+//! same poses on a 768k-face refinement, when `../shared/meshes` is there
+//! (the section says why it was skipped otherwise). Writes a Markdown report
+//! linking everything.
 
-use crate::pretrain::PRETRAINED_DIR;
+use crate::pretrain::{ELEPHANT_DIR, ELEPHANT_MESH, PRETRAINED_DIR};
 use crate::pyenv::PyEnv;
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
@@ -148,7 +152,14 @@ pub fn run(env: &PyEnv, out: &Path) -> Result<()> {
     let start = std::time::Instant::now();
     let s = |p: &Path| p.to_string_lossy().into_owned();
     // The demo owns these folders; a previous demo's are replaced.
-    for sub in ["data", "run", "samples", "spectrum", "pretrained_samples"] {
+    for sub in [
+        "data",
+        "run",
+        "samples",
+        "spectrum",
+        "pretrained_samples",
+        "elephant",
+    ] {
         let dir = out.join(sub);
         if dir.exists() {
             std::fs::remove_dir_all(&dir)
@@ -299,6 +310,12 @@ pub fn run(env: &PyEnv, out: &Path) -> Result<()> {
         log_tail
     };
 
+    println!(
+        "== the pretrained shape model ({ELEPHANT_DIR}): the training mesh and a fine refinement"
+    );
+    let shapes = shape_model(&exe, &out.join("elephant"))?;
+    tick("pretrained shape model", &mut timings);
+
     let mut md = String::new();
     writeln!(md, "# mfm demo: flow matching across triangulations\n")?;
     writeln!(
@@ -411,6 +428,7 @@ compares noise kinds.\n"
         "| the goal | <= {} | >= {} | >= {} | | | | | |\n",
         GOAL.1, GOAL.0, GOAL.2
     )?;
+    writeln!(md, "{shapes}")?;
     writeln!(md, "## Time\n")?;
     for (name, secs) in &timings {
         writeln!(md, "- {name}: {secs:.1} s")?;
@@ -428,6 +446,111 @@ compares noise kinds.\n"
         report_path.display()
     );
     Ok(())
+}
+
+/// Midpoint subdivisions of the shape model's 3000-face training mesh the
+/// demo samples on: 4 rounds, 768k faces.
+const SHAPE_SUBDIVISIONS: &str = "4";
+
+/// The demo's shape part: the pretrained elephant model
+/// ([`ELEPHANT_DIR`]) samples 4 poses on its training mesh and the same 4
+/// (the same noise, drawn on the training mesh and carried, `mfm sample
+/// --noise-from`) on the mesh subdivided [`SHAPE_SUBDIVISIONS`] times, with
+/// pictures of training poses beside them. Needs the shared elephant mesh
+/// (its training mesh is made from it, and the shared meshes are not part
+/// of the repository): without it, or without the model, the section says
+/// why it was skipped. Returns the report's section.
+fn shape_model(exe: &Path, out: &Path) -> Result<String> {
+    let s = |p: &Path| p.to_string_lossy().into_owned();
+    let heading = "## A pretrained shape model at 768k faces\n\n";
+    let model = crate::root().join(ELEPHANT_DIR);
+    let mesh = crate::root().join(ELEPHANT_MESH);
+    let skip = |why: String| -> Result<String> {
+        println!("skipping the shape model: {why}");
+        Ok(format!("{heading}Skipped: {why}.\n"))
+    };
+    if let Err(e) = crate::pretrain::shipped_at(ELEPHANT_DIR, "elephant") {
+        return skip(format!("{e:#}"));
+    }
+    if !mesh.is_file() {
+        return skip(format!(
+            "{} is not there (the shape model's training mesh is made from the shared \
+             meshes, which are not part of the repository)",
+            mesh.display()
+        ));
+    }
+    let data = out.join("data");
+    mfm_live(
+        exe,
+        &[
+            "dataset",
+            "deform",
+            "--mesh",
+            &s(&mesh),
+            "--n",
+            "8",
+            "--reference",
+            "4",
+            "--out",
+            &s(&data),
+        ],
+    )?;
+    let coarse = data.join("coarse.ply");
+    let fine = out.join("fine.ply");
+    mfm_live(
+        exe,
+        &[
+            "remesh",
+            &s(&coarse),
+            "--subdivide",
+            SHAPE_SUBDIVISIONS,
+            "--out",
+            &s(&fine),
+        ],
+    )?;
+    let sample = |mesh: &Path, dir: &str, extra: &[&str]| -> Result<serde_json::Value> {
+        let target = out.join(dir);
+        let mut args = vec![
+            "sample".to_owned(),
+            "--run".to_owned(),
+            s(&model),
+            "--mesh".to_owned(),
+            s(mesh),
+            "--n".to_owned(),
+            "4".to_owned(),
+            "--ply".to_owned(),
+            "1".to_owned(),
+            "--out".to_owned(),
+            s(&target),
+        ];
+        args.extend(extra.iter().map(|a| (*a).to_owned()));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        mfm_live(exe, &args)?;
+        crate::flow_steps::read_json(&target.join("timing.json"))
+    };
+    let at_training = sample(&coarse, "coarse_samples", &[])?;
+    let at_fine = sample(&fine, "fine_samples", &["--noise-from", &s(&coarse)])?;
+    let readme = std::fs::read_to_string(model.join("README.md")).unwrap_or_default();
+    let n = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+    Ok(format!(
+        "{heading}`{ELEPHANT_DIR}/` (shipped; `cargo xtask pretrain elephant` makes it \
+again): a shape model trained on as-rigid-as-possible poses of the elephant on a \
+{:.0}-vertex mesh, with smooth Matérn noise (`matern-smooth:100:2`), sampled on that mesh \
+and on the mesh subdivided {SHAPE_SUBDIVISIONS} times ({:.0} vertices), from the same \
+noise (drawn on the training mesh and carried, `mfm sample --noise-from`).\n\n\
+Training poses (`elephant/data/train`, a few of the kind the model learned from):\n\n\
+![training poses](elephant/data/preview.png)\n\n\
+Its samples on the training mesh ({:.2} s a sample):\n\n\
+![samples on the training mesh](elephant/coarse_samples/samples.png)\n\n\
+The same samples on the fine mesh ({:.1} s a sample):\n\n\
+![samples on the fine mesh](elephant/fine_samples/samples.png)\n\n\
+How the model was made:\n\n{}\n",
+        n(&at_training, "vertices"),
+        n(&at_fine, "vertices"),
+        n(&at_training, "seconds_per_sample"),
+        n(&at_fine, "seconds_per_sample"),
+        readme.lines().skip(1).collect::<Vec<_>>().join("\n").trim()
+    ))
 }
 
 /// The demo's goal on the test mesh (generation-quality issue): median peak,

@@ -123,6 +123,10 @@ enum PretrainCmd {
     /// The demo's GMM model on the built-in blob
     /// (fixtures/pretrained/gmm-blob/), sampled first by `cargo xtask demo`.
     Gmm(pretrain::PretrainArgs),
+    /// The shape model: ARAP poses of ../shared/meshes/elephant.obj with
+    /// smooth Matérn noise (fixtures/pretrained/elephant/), sampled by
+    /// `cargo xtask demo` on a fine refinement.
+    Elephant(pretrain::PretrainArgs),
 }
 
 #[derive(Subcommand)]
@@ -317,6 +321,10 @@ fn main() -> Result<()> {
         Cmd::Pretrain(PretrainCmd::Gmm(args)) => {
             let env = pyenv::ensure()?;
             pretrain::gmm(&env, &args)
+        }
+        Cmd::Pretrain(PretrainCmd::Elephant(args)) => {
+            let env = pyenv::ensure()?;
+            pretrain::elephant(&env, &args)
         }
         Cmd::TimeToQuality(args) => {
             let env = pyenv::ensure()?;

@@ -1,4 +1,5 @@
-//! `cargo xtask pretrain gmm`: the pretrained demo model.
+//! `cargo xtask pretrain gmm` and `cargo xtask pretrain elephant`: the
+//! pretrained models the demo samples.
 //!
 //! Trains the GMM blob model that `cargo xtask demo` samples from first
 //! (the demo's dataset: Gaussian-bump signals on the built-in blob, seed 0)
@@ -15,7 +16,7 @@ use crate::flow_steps::{Mfm, Quality, arg, num, out_dir};
 use crate::pyenv::PyEnv;
 use anyhow::{Context, Result, bail};
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Where the pretrained model lives, relative to the workspace root.
 pub const PRETRAINED_DIR: &str = "fixtures/pretrained/gmm-blob";
@@ -67,14 +68,15 @@ log_every = 100
 /// Arguments of `cargo xtask pretrain gmm`.
 #[derive(clap::Args)]
 pub struct PretrainArgs {
-    /// Scratch folder of the dataset and the run.
-    #[arg(long, default_value = "out/pretrain/gmm")]
-    pub out: PathBuf,
+    /// Scratch folder of the dataset and the run (default:
+    /// out/pretrain/<model>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
 }
 
 /// Trains, evaluates and installs the pretrained GMM model.
 pub fn gmm(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
-    let out = out_dir(&args.out);
+    let out = out_dir(args.out.as_deref().unwrap_or(Path::new("out/pretrain/gmm")));
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
     let exe = crate::demo::mfm_binary(env)?;
     let mfm = Mfm { exe: &exe };
@@ -84,36 +86,7 @@ pub fn gmm(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
     std::fs::write(&config, PRETRAIN_CONFIG)
         .with_context(|| format!("cannot write {}", config.display()))?;
     let run = out.join("run");
-    if run.join("model.safetensors").is_file() {
-        println!("{} is trained already", run.display());
-    } else if run.join("config.toml").is_file() {
-        mfm.run(&[
-            "train",
-            "--resume",
-            "--out",
-            &arg(&run),
-            "--dataset",
-            &arg(&data.join("train")),
-        ])?;
-    } else {
-        mfm.run(&[
-            "train",
-            "--config",
-            &arg(&config),
-            "--dataset",
-            &arg(&data.join("train")),
-            "--out",
-            &arg(&run),
-        ])?;
-    }
-    let log = std::fs::read_to_string(run.join("train_log.csv"))
-        .with_context(|| format!("cannot read {}", run.join("train_log.csv").display()))?;
-    let train_seconds = log
-        .lines()
-        .last()
-        .and_then(|l| l.rsplit(',').next())
-        .and_then(|s| s.parse::<f64>().ok())
-        .unwrap_or(f64::NAN);
+    let train_seconds = train_or_resume(&mfm, &config, &data.join("train"), &run)?;
 
     // the demo's evaluation: 64 samples on the test mesh, seed 7
     let samples = out.join("samples");
@@ -132,23 +105,7 @@ pub fn gmm(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
     )?;
     let q = Quality::of(&metrics);
 
-    let target = crate::root().join(PRETRAINED_DIR);
-    let parent = target
-        .parent()
-        .context("the pretrained folder has a parent")?;
-    std::fs::create_dir_all(parent)
-        .with_context(|| format!("cannot create {}", parent.display()))?;
-    let staging = parent.join(format!(".gmm-blob.tmp-{}", std::process::id()));
-    if staging.exists() {
-        std::fs::remove_dir_all(&staging)?;
-    }
-    std::fs::create_dir(&staging)
-        .with_context(|| format!("cannot create {}", staging.display()))?;
-    let fill = || -> Result<()> {
-        for name in MODEL_FILES {
-            std::fs::copy(run.join(name), staging.join(name))
-                .with_context(|| format!("cannot copy {} from {}", name, run.display()))?;
-        }
+    let target = install(&run, PRETRAINED_DIR, &|| -> Result<String> {
         let mut md = String::new();
         writeln!(md, "# Pretrained GMM model on the built-in blob\n")?;
         writeln!(
@@ -176,7 +133,46 @@ pub fn gmm(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
             num(&metrics, "one_nna"),
             num(&metrics, "test_error")
         )?;
-        std::fs::write(staging.join("README.md"), md)?;
+        Ok(md)
+    })?;
+    println!(
+        "pretrained model installed in {} (residual {:.3}, peak {:.2}, {:.2} bumps per sample)",
+        target.display(),
+        q.residual[1],
+        q.peak[1],
+        q.bumps
+    );
+    Ok(())
+}
+
+/// Copies the model files of `run` and the `README.md` that `readme`
+/// writes into `fixtures/pretrained/<dir>` (a path relative to the
+/// workspace root), replacing the folder whole: it is filled beside it,
+/// then renamed, so an interruption leaves the shipped model as it was.
+fn install(run: &Path, dir: &str, readme: &dyn Fn() -> Result<String>) -> Result<PathBuf> {
+    let target = crate::root().join(dir);
+    let parent = target
+        .parent()
+        .context("the pretrained folder has a parent")?;
+    let name = target
+        .file_name()
+        .context("the pretrained folder has a name")?
+        .to_string_lossy()
+        .into_owned();
+    std::fs::create_dir_all(parent)
+        .with_context(|| format!("cannot create {}", parent.display()))?;
+    let staging = parent.join(format!(".{name}.tmp-{}", std::process::id()));
+    if staging.exists() {
+        std::fs::remove_dir_all(&staging)?;
+    }
+    std::fs::create_dir(&staging)
+        .with_context(|| format!("cannot create {}", staging.display()))?;
+    let fill = || -> Result<()> {
+        for name in MODEL_FILES {
+            std::fs::copy(run.join(name), staging.join(name))
+                .with_context(|| format!("cannot copy {} from {}", name, run.display()))?;
+        }
+        std::fs::write(staging.join("README.md"), readme()?)?;
         Ok(())
     };
     if let Err(e) = fill() {
@@ -189,26 +185,208 @@ pub fn gmm(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
     }
     std::fs::rename(&staging, &target)
         .with_context(|| format!("cannot install {}", target.display()))?;
-    println!(
-        "pretrained model installed in {} (residual {:.3}, peak {:.2}, {:.2} bumps per sample)",
-        target.display(),
-        q.residual[1],
-        q.peak[1],
-        q.bumps
+    Ok(target)
+}
+
+/// Trains `config` on `dataset` into `run`, resuming a run that has
+/// checkpoints and leaving a finished one alone; returns the training's
+/// seconds from its log.
+fn train_or_resume(mfm: &Mfm, config: &Path, dataset: &Path, run: &Path) -> Result<f64> {
+    if run.join("model.safetensors").is_file() {
+        println!("{} is trained already", run.display());
+    } else if run.join("config.toml").is_file() {
+        mfm.run(&[
+            "train",
+            "--resume",
+            "--out",
+            &arg(run),
+            "--dataset",
+            &arg(dataset),
+        ])?;
+    } else {
+        mfm.run(&[
+            "train",
+            "--config",
+            &arg(config),
+            "--dataset",
+            &arg(dataset),
+            "--out",
+            &arg(run),
+        ])?;
+    }
+    let log = std::fs::read_to_string(run.join("train_log.csv"))
+        .with_context(|| format!("cannot read {}", run.join("train_log.csv").display()))?;
+    Ok(log
+        .lines()
+        .last()
+        .and_then(|l| l.rsplit(',').next())
+        .and_then(|s| s.parse::<f64>().ok())
+        .unwrap_or(f64::NAN))
+}
+
+/// Where the pretrained shape model lives, relative to the workspace root.
+pub const ELEPHANT_DIR: &str = "fixtures/pretrained/elephant";
+
+/// The shape the elephant model is trained on, relative to the workspace
+/// root (the shared meshes are not part of the repository).
+pub const ELEPHANT_MESH: &str = "../shared/meshes/elephant.obj";
+
+/// The elephant model's run configuration: the `cpu-deform` preset (W32
+/// K3 conditioned on the source xyz, 3000 steps, warm-up and cosine decay
+/// to 1e-5, logit-normal times, weight average, 5 midpoint steps to
+/// sample) with smooth Matérn noise, whose samples keep no noise texture
+/// on meshes many times finer (docs/BENCHMARKS.md, "Noise texture and cost
+/// against resolution"), on one thread so that the command makes the same
+/// weights again.
+pub const ELEPHANT_CONFIG: &str = "\
+# cargo xtask pretrain elephant: the pretrained shape model
+[model]
+preset = \"small\"
+width = 32
+blocks = 3
+vector_layers = 3
+condition_on_xyz = true
+
+[noise]
+kind = \"matern-smooth:100:2\"
+scale = 3.0
+
+[train]
+steps = 3000
+batch = 4
+lr = 4e-3
+lr_schedule = { warmup_fraction = 0.05, floor = 1e-5 }
+ema = 0.999
+time = \"logit-normal\"
+threads = 1
+checkpoint_every = 500
+log_every = 10
+
+[sample]
+steps = 5
+";
+
+/// Trains, evaluates and installs the pretrained elephant model: ARAP
+/// poses of `../shared/meshes/elephant.obj` (`mfm dataset deform`, its
+/// defaults: 400 training shapes on a 3000-face mesh, 100 held out),
+/// [`ELEPHANT_CONFIG`], judged by 32 samples on the non-uniform evaluation
+/// mesh against the held-out shapes.
+pub fn elephant(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
+    let mesh = crate::root().join(ELEPHANT_MESH);
+    if !mesh.is_file() {
+        bail!(
+            "{} not found: the elephant model is trained on the shared meshes, \
+             which are not part of the repository",
+            mesh.display()
+        );
+    }
+    let out = out_dir(
+        args.out
+            .as_deref()
+            .unwrap_or(Path::new("out/pretrain/elephant")),
     );
+    std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
+    let exe = crate::demo::mfm_binary(env)?;
+    let mfm = Mfm { exe: &exe };
+    let data = out.join("data");
+    if !data.join("train").is_dir() {
+        mfm.run(&[
+            "dataset",
+            "deform",
+            "--mesh",
+            &arg(&mesh),
+            "--out",
+            &arg(&data),
+        ])?;
+    }
+    let config = out.join("run.toml");
+    std::fs::write(&config, ELEPHANT_CONFIG)
+        .with_context(|| format!("cannot write {}", config.display()))?;
+    let run = out.join("run");
+    let train_seconds = train_or_resume(&mfm, &config, &data.join("train"), &run)?;
+    let samples = out.join("samples");
+    if samples.exists() {
+        std::fs::remove_dir_all(&samples)
+            .with_context(|| format!("cannot remove {}", samples.display()))?;
+    }
+    mfm.sample(
+        &run,
+        &data.join("eval.ply"),
+        32,
+        7,
+        &samples,
+        &["--ply", "0"],
+    )?;
+    let metrics = mfm.eval(
+        &samples.join("samples.npy"),
+        &["--reference", &arg(&data)],
+        &out.join("metrics.json"),
+        Some(&out.join("eval.png")),
+    )?;
+    let target = install(&run, ELEPHANT_DIR, &|| -> Result<String> {
+        let mut md = String::new();
+        writeln!(md, "# Pretrained shape model: elephant poses\n")?;
+        writeln!(
+            md,
+            "Made by `cargo xtask pretrain elephant`: `mfm dataset deform` of \
+             `../shared/meshes/elephant.obj` (its defaults: 400 as-rigid-as-possible poses \
+             on a 3000-face mesh, seed 0), the run configuration in `config.toml` (the \
+             `cpu-deform` recipe with `matern-smooth:100:2` noise), the log in \
+             `train_log.csv`: {train_seconds:.0} s of training on one thread of the \
+             project's 2-core machine. `cargo xtask demo` samples it on the training \
+             mesh and on a 768k-face refinement of it when the shared meshes are there.\n"
+        )?;
+        writeln!(
+            md,
+            "Quality of 32 samples (seed 7) on the dataset's non-uniform evaluation mesh, by \
+             `mfm eval` against the 100 held-out poses:\n"
+        )?;
+        writeln!(
+            md,
+            "| projection MSE (median) | rotation spread / data's | translation spread / data's | MMD | COV | 1-NNA |\n|---|---|---|---|---|---|"
+        )?;
+        let spread = |key: &str| {
+            metrics
+                .pointer(&format!("/spread_ratio/{key}"))
+                .and_then(|v| v.as_f64())
+                .unwrap_or(f64::NAN)
+        };
+        writeln!(
+            md,
+            "| {:.3e} | {:.2} | {:.2} | {:.4} | {:.3} | {:.3} |",
+            num(&metrics, "projection_mse_median"),
+            spread("rotation"),
+            spread("translation"),
+            num(&metrics, "mmd"),
+            num(&metrics, "cov"),
+            num(&metrics, "one_nna"),
+        )?;
+        Ok(md)
+    })?;
+    println!("pretrained shape model installed in {}", target.display());
     Ok(())
 }
 
-/// The shipped pretrained model folder, checked for its files.
+/// The shipped pretrained GMM model folder, checked for its files.
 ///
 /// # Errors
 /// When a file of [`MODEL_FILES`] is missing.
 pub fn shipped() -> Result<PathBuf> {
-    let dir = crate::root().join(PRETRAINED_DIR);
+    shipped_at(PRETRAINED_DIR, "gmm")
+}
+
+/// The pretrained model folder `dir` (relative to the workspace root),
+/// checked for its files; `model` names the `cargo xtask pretrain`
+/// subcommand that makes it.
+///
+/// # Errors
+/// When a file of [`MODEL_FILES`] is missing.
+pub fn shipped_at(dir: &str, model: &str) -> Result<PathBuf> {
+    let dir = crate::root().join(dir);
     for name in MODEL_FILES {
         if !dir.join(name).is_file() {
             bail!(
-                "the pretrained model {} lacks {name}: run `cargo xtask pretrain gmm`",
+                "the pretrained model {} lacks {name}: run `cargo xtask pretrain {model}`",
                 dir.display()
             );
         }

@@ -96,6 +96,14 @@ pub struct SampleArgs {
     /// samples; --seed is then unused.
     #[arg(long, conflicts_with_all = ["n", "source", "seed"])]
     pub(crate) x0: Option<PathBuf>,
+    /// Draw the starting noise on this mesh (the run's training mesh, or any
+    /// coarser triangulation of the --mesh surface, in the same units) and
+    /// carry it to --mesh (closest point, barycentric weights): samples on
+    /// a fine mesh that start from the very noise of the same seed's
+    /// samples on the coarse one, without the frequencies the coarse mesh
+    /// cannot hold.
+    #[arg(long, value_name = "MESH", conflicts_with_all = ["x0", "source"])]
+    pub(crate) noise_from: Option<crate::mesh::MeshSpec>,
     /// ODE steps (default: the run's sample.steps).
     #[arg(long)]
     pub(crate) steps: Option<usize>,
@@ -395,6 +403,15 @@ pub fn sample(a: SampleArgs) -> Result<()> {
             n
         }
     };
+    if let Some(from_arg) = &a.noise_from {
+        let from = load_mesh_checked(from_arg)?;
+        let start = sampler
+            .carried_noise(&from, &mesh, count, a.seed)
+            .with_context(|| {
+                format!("--noise-from {from_arg}: carrying its noise to --mesh {mesh_arg}")
+            })?;
+        sampler = sampler.with_start_noise(start)?;
+    }
     for w in sampler.surface_warnings(&mesh) {
         eprintln!(
             "warning: {mesh_arg}: {w}; the run's frame assumes the sampling mesh is the training surface in the dataset's units"

@@ -1244,3 +1244,77 @@ fn openmp_workers_spin_briefly_unless_the_user_chose() {
         "{text}"
     );
 }
+
+/// fixtures/pretrained/elephant (`cargo xtask pretrain elephant`): at most
+/// 1 MB, and, where the shared elephant mesh is there to make its training
+/// mesh, it samples poses of the elephant's size on that mesh.
+#[test]
+#[cfg(feature = "network")]
+fn the_shipped_shape_model_is_small_and_samples_elephants() {
+    let run = fixtures().join("pretrained/elephant");
+    let bytes: u64 = std::fs::read_dir(&run)
+        .unwrap()
+        .map(|e| e.unwrap().metadata().unwrap().len())
+        .sum();
+    assert!(bytes <= 1 << 20, "{bytes} bytes");
+    let flow = std::fs::read_to_string(run.join("flow.json")).unwrap();
+    assert!(flow.contains("matern-smooth:100:2"), "{flow}");
+    let elephant =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/meshes/elephant.obj");
+    if !elephant.is_file() {
+        eprintln!(
+            "skipped sampling the shape model: {} not found",
+            elephant.display()
+        );
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let p = |s: &str| dir.path().join(s).to_string_lossy().into_owned();
+    let o = mfm(&[
+        "dataset",
+        "deform",
+        "--mesh",
+        &elephant.to_string_lossy(),
+        "--n",
+        "2",
+        "--reference",
+        "1",
+        "--out",
+        &p("data"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = mfm(&[
+        "sample",
+        "--run",
+        &run.to_string_lossy(),
+        "--mesh",
+        &p("data/coarse.ply"),
+        "--n",
+        "2",
+        "--ply",
+        "0",
+        "--out",
+        &p("s"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (shape, values) = read_npy_f32(&dir.path().join("s/samples.npy"));
+    assert_eq!((shape[0], shape[2]), (2, 3));
+    assert!(values.iter().all(|x| x.is_finite()));
+    // poses of the training shape: its size (unit bounding-box diagonal)
+    for s in 0..2 {
+        let n = shape[1] as usize;
+        let pts = &values[s * n * 3..(s + 1) * n * 3];
+        let (mut lo, mut hi) = ([f32::MAX; 3], [f32::MIN; 3]);
+        for p in pts.chunks(3) {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let diagonal = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f32>().sqrt();
+        assert!(
+            (0.8..1.25).contains(&diagonal),
+            "sample {s}: diagonal {diagonal}"
+        );
+    }
+}

@@ -662,3 +662,82 @@ fn mesh_files_may_have_names_that_are_not_utf8() {
         common::err(&o)
     );
 }
+
+/// `sample --noise-from`: the noise of the training mesh carried to a
+/// refinement; onto the training mesh itself it is the noise `sample`
+/// draws there, so the samples are the plain ones.
+#[test]
+#[cfg(feature = "network")]
+fn sampling_a_refinement_from_the_noise_of_the_training_mesh() {
+    let d = tempfile::tempdir().unwrap();
+    let d = d.path();
+    tiny_run(d);
+    let read = |p: &str| {
+        let bytes = fs::read(d.join(p)).unwrap();
+        let npy = npyz::NpyFile::new(&bytes[..]).unwrap();
+        let shape = npy.shape().to_vec();
+        (shape, npy.into_vec::<f32>().unwrap())
+    };
+    let (plain_shape, plain) = read("out/samples.npy");
+    let sample = |mesh: &str, out: &str| {
+        ok(
+            d,
+            &[
+                "sample",
+                "--run",
+                "tiny",
+                "--mesh",
+                mesh,
+                "--noise-from",
+                "data/train/mesh.ply",
+                "--n",
+                "2",
+                "--out",
+                out,
+            ],
+        );
+    };
+    sample("data/train/mesh.ply", "same");
+    let (shape, same) = read("same/samples.npy");
+    assert_eq!(shape, plain_shape);
+    let worst = same
+        .iter()
+        .zip(&plain)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-4, "{worst}");
+    ok(
+        d,
+        &[
+            "remesh",
+            "data/train/mesh.ply",
+            "--subdivide",
+            "1",
+            "--out",
+            "fine.ply",
+        ],
+    );
+    sample("fine.ply", "fine");
+    let (shape, fine) = read("fine/samples.npy");
+    assert_eq!(shape[0], 2);
+    assert!(shape[1] > plain_shape[1]);
+    assert!(fine.iter().all(|x| x.is_finite()));
+    // --noise-from and --x0 both start the ODE: one at a time
+    refused(
+        d,
+        &[
+            "sample",
+            "--run",
+            "tiny",
+            "--mesh",
+            "fine.ply",
+            "--noise-from",
+            "data/train/mesh.ply",
+            "--x0",
+            "out/samples.npy",
+            "--out",
+            "x",
+        ],
+        "cannot be used with",
+    );
+}

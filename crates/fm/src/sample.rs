@@ -230,6 +230,11 @@ pub fn batch_within_memory(faces: usize, width: usize, batch: usize) -> usize {
     batch.min(SAMPLE_BATCH_BYTES / per_sample).max(1)
 }
 
+/// The largest distance, over the bounding-box diagonal of the mesh it is
+/// carried to, of a vertex from the surface noise is carried from
+/// ([`Sampler::carried_noise`]).
+pub const CARRY_TOLERANCE: f64 = 0.01;
+
 /// Vertex positions as an `f32` tensor `[1, V, 3]` on `device`.
 pub(crate) fn positions_tensor(mesh: &TriMesh, device: Device) -> Tensor {
     let flat: Vec<f32> = mesh
@@ -734,6 +739,77 @@ impl Sampler {
         } else {
             Ok(x)
         }
+    }
+
+    /// Starting noise for samples `0..count` of `seed` on `to`, drawn on
+    /// `from` (as [`Sampler::noise`] draws it there) and carried to `to`'s
+    /// vertices by closest point and barycentric weights
+    /// ([`mfm_data::transfer::Transfer`]), then centred again with `to`'s
+    /// lumped mass for a centred run. With `from` the training mesh and
+    /// `to` a refinement of it, the samples on `to` start from the very
+    /// noise of the samples on `from`, with no frequency `from` cannot
+    /// hold: what is left of a difference between the two is the network's
+    /// own behaviour at the new resolution. Give the result to
+    /// [`Sampler::with_start_noise`] (call this first: a sampler with
+    /// starting noise draws nothing).
+    ///
+    /// # Errors
+    /// [`FmError::Config`] when a vertex of `to` lies farther than
+    /// [`CARRY_TOLERANCE`] of `to`'s bounding-box diagonal from `from`'s
+    /// surface (not two triangulations of one surface, or not in the same
+    /// units); the errors of [`Sampler::prepare`] and [`Sampler::noise`].
+    pub fn carried_noise(
+        &self,
+        from: &TriMesh,
+        to: &TriMesh,
+        count: usize,
+        seed: u64,
+    ) -> Result<StartNoise> {
+        let transfer = mfm_data::transfer::Transfer::locate(from, to)?;
+        let diagonal = to.bounding_box_diagonal();
+        let (vertex, distance) = transfer.farthest();
+        if distance > CARRY_TOLERANCE * diagonal {
+            return Err(FmError::Config(format!(
+                "vertex {vertex} of the mesh to sample lies {distance:.3e} from the surface the noise is \
+                 drawn on, {:.1}% of its bounding-box diagonal (at most {}%): not a triangulation of \
+                 the same surface in the same units",
+                100.0 * distance / diagonal,
+                100.0 * CARRY_TOLERANCE
+            )));
+        }
+        let source = self.prepare(from)?;
+        let x = self.noise(&source, 0, count, seed)?;
+        let drawn = Vec::<f32>::try_from(&x.to_device(Device::Cpu).contiguous().view([-1]))?;
+        let c = self.flow.channels;
+        let (vf, vt) = (from.num_vertices(), to.num_vertices());
+        let mass = mfm_geometry::operators::lumped_mass(to);
+        let total: f64 = mass.iter().sum();
+        let mut values = Vec::with_capacity(count * vt * c);
+        for sample in drawn.chunks(vf * c) {
+            let mut carried = transfer.apply(sample, c)?;
+            if self.flow.centered && total > 0.0 {
+                for k in 0..c {
+                    let mean = carried
+                        .iter()
+                        .skip(k)
+                        .step_by(c)
+                        .zip(&mass)
+                        .map(|(&x, m)| f64::from(x) * m)
+                        .sum::<f64>()
+                        / total;
+                    carried
+                        .iter_mut()
+                        .skip(k)
+                        .step_by(c)
+                        .for_each(|x| *x = (f64::from(*x) - mean) as f32);
+                }
+            }
+            values.extend(carried);
+        }
+        Ok(StartNoise {
+            values,
+            shape: [count, vt, c],
+        })
     }
 
     /// The velocity `v(x, t)` at time `t` for a batch `x: [B, V, C]` (no

@@ -503,3 +503,80 @@ fn batches_shrink_on_meshes_whose_activations_would_not_fit() {
     let target = sampler.prepare(&mesh).unwrap();
     assert_eq!(sampler.batch_on(&target, 4), 4);
 }
+
+#[test]
+fn noise_carried_to_a_refinement_is_the_coarse_noise_interpolated() {
+    let coarse = procedural::icosphere(1);
+    let fine = mfm_geometry::subdivide::midpoint(&coarse).unwrap();
+    let mut spec = flow(NoiseKind::Matern { tau: 10.0 }, 0.15);
+    spec.centered = true;
+    let sampler = Sampler::new(affine_velocity_net(0.8, 0.25), spec).unwrap();
+    let (n, seed) = (3, 11);
+    let c = sampler.flow().channels;
+    // onto the same mesh: the sampler's own noise (centring again changes
+    // nothing but round-off)
+    let own = sampler
+        .noise(&sampler.prepare(&coarse).unwrap(), 0, n, seed)
+        .unwrap();
+    let own = Vec::<f32>::try_from(&own.contiguous().view([-1])).unwrap();
+    let same = sampler.carried_noise(&coarse, &coarse, n, seed).unwrap();
+    assert_eq!(same.shape, [n, coarse.num_vertices(), c]);
+    let worst = own
+        .iter()
+        .zip(&same.values)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-5, "{worst}");
+    // onto the midpoint subdivision: the coarse vertices keep their values
+    // (the first vertices of the subdivision, up to one constant per
+    // channel from centring with the fine mass) and every new vertex is
+    // the mean of an edge's ends, so the fine noise is piecewise linear
+    let carried = sampler.carried_noise(&coarse, &fine, n, seed).unwrap();
+    let (vc, vf) = (coarse.num_vertices(), fine.num_vertices());
+    assert_eq!(carried.shape, [n, vf, c]);
+    let key = |p: [f64; 3]| p.map(|x| (x * 1e9).round() as i64);
+    let mut edge_of_midpoint = std::collections::HashMap::new();
+    for f in coarse.faces() {
+        for (a, b) in [(f[0], f[1]), (f[1], f[2]), (f[2], f[0])] {
+            let (pa, pb) = (
+                coarse.positions()[a as usize],
+                coarse.positions()[b as usize],
+            );
+            let m = [0, 1, 2].map(|i| 0.5 * (pa[i] + pb[i]));
+            edge_of_midpoint.insert(key(m), (a as usize, b as usize));
+        }
+    }
+    for s in 0..n {
+        for k in 0..c {
+            let at = |v: usize| carried.values[(s * vf + v) * c + k];
+            let was = |v: usize| own[(s * vc + v) * c + k];
+            let shift = at(0) - was(0);
+            for v in 0..vc {
+                assert!(
+                    (at(v) - was(v) - shift).abs() < 1e-5,
+                    "sample {s} vertex {v}"
+                );
+            }
+            for v in vc..vf {
+                let (a, b) = edge_of_midpoint[&key(fine.positions()[v])];
+                let mean = 0.5 * (was(a) + was(b));
+                assert!((at(v) - mean - shift).abs() < 1e-5, "sample {s} vertex {v}");
+            }
+        }
+    }
+    // and its mass-weighted mean is zero on the fine mesh (a centred run)
+    let mass = mfm_geometry::operators::lumped_mass(&fine);
+    for k in 0..c {
+        let mean: f64 = (0..vf)
+            .map(|v| f64::from(carried.values[v * c + k]) * mass[v])
+            .sum::<f64>()
+            / mass.iter().sum::<f64>();
+        assert!(mean.abs() < 1e-6, "{mean}");
+    }
+    // a mesh off the surface (another scale) is refused, naming why
+    let bigger = fine.transformed(2.0, [0.0; 3]);
+    let e = sampler
+        .carried_noise(&coarse, &bigger, n, seed)
+        .unwrap_err();
+    assert!(e.to_string().contains("same surface"), "{e}");
+}
