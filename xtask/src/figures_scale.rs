@@ -1,0 +1,220 @@
+//! `cargo xtask reproduce-figures scale`: a shape model sampled far beyond
+//! its training resolution, timed and pictured (issue 41).
+//!
+//! The shipped shape model (`fixtures/pretrained/elephant/`, or `--run`
+//! with its training mesh `--mesh`) samples `--samples` shapes on its
+//! training mesh and on `--levels` rounds of midpoint subdivision of it (4x
+//! the faces each: the elephant's 3000 faces become 3.07M at level 5),
+//! every level from the same noise (drawn on the training mesh and carried,
+//! `mfm sample --noise-from`), so the pictures show the same shapes at
+//! every resolution. Per level: vertices, faces, seconds per sample (from
+//! `timing.json`: operators, factorizations, noise, ODE and writing) and the
+//! sampling process's peak resident memory (`wait4`). Writes `report.md`
+//! and `report.json` under `--out`, with each level's `samples.png`.
+//! Measure on an otherwise idle machine: libtorch's workers slow down
+//! several times beside another busy process.
+
+use crate::flow_steps::{arg, fresh_dir, out_dir};
+use crate::pyenv::PyEnv;
+use anyhow::{Context, Result, bail};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Arguments of `reproduce-figures scale`.
+#[derive(clap::Args)]
+pub struct ScaleArgs {
+    /// Output folder (relative paths are relative to the workspace root).
+    #[arg(long, default_value = "out/figures/scale")]
+    pub out: PathBuf,
+    /// A shape run to sample (default: the shipped elephant model, whose
+    /// training mesh is made from ../shared/meshes/elephant.obj).
+    #[arg(long, requires = "mesh")]
+    pub run: Option<PathBuf>,
+    /// The run's training mesh (with --run).
+    #[arg(long)]
+    pub mesh: Option<PathBuf>,
+    /// Rounds of midpoint subdivision beyond the training mesh.
+    #[arg(long, default_value_t = 5)]
+    pub levels: u32,
+    /// Samples per level (all in one `mfm sample` call).
+    #[arg(long, default_value_t = 2)]
+    pub samples: usize,
+}
+
+/// One level's measurements.
+#[derive(serde::Serialize)]
+struct Level {
+    level: u32,
+    vertices: u64,
+    faces: u64,
+    seconds_per_sample: f64,
+    peak_bytes: u64,
+}
+
+/// Runs `exe args` and returns its peak resident set size in bytes.
+fn run_measured(exe: &Path, args: &[String]) -> Result<u64> {
+    println!("$ mfm {}", args.join(" "));
+    let child = std::process::Command::new(exe)
+        .args(args)
+        .spawn()
+        .with_context(|| format!("cannot run {}", exe.display()))?;
+    let pid = child.id() as libc::pid_t;
+    let mut status = 0;
+    // SAFETY: a zeroed rusage is a valid out-parameter; the child is ours
+    // and waited for exactly once (here, not through `child`).
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    let waited = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+    if waited != pid {
+        bail!("waiting for mfm {}: {}", args.join(" "), std::io::Error::last_os_error());
+    }
+    if !(libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0) {
+        bail!("mfm {} failed (wait status {status})", args.join(" "));
+    }
+    // ru_maxrss is in KiB on Linux
+    Ok(u64::try_from(usage.ru_maxrss).unwrap_or(0) * 1024)
+}
+
+/// Runs the command (see the [module docs](self)).
+pub fn scale(env: &PyEnv, args: &ScaleArgs) -> Result<()> {
+    let out = out_dir(&args.out);
+    fresh_dir(&out)?;
+    let exe = crate::demo::mfm_binary(env)?;
+    let (run, coarse) = match (&args.run, &args.mesh) {
+        (Some(run), Some(mesh)) => (out_dir(run), out_dir(mesh)),
+        _ => {
+            let run = crate::pretrain::shipped_at(crate::pretrain::ELEPHANT_DIR, "elephant")?;
+            let mesh = crate::root().join(crate::pretrain::ELEPHANT_MESH);
+            if !mesh.is_file() {
+                bail!(
+                    "{} not found: the shipped shape model's training mesh is made from the \
+                     shared meshes (or pass --run RUN --mesh ITS_TRAINING_MESH)",
+                    mesh.display()
+                );
+            }
+            let data = out.join("data");
+            crate::demo::mfm_live(
+                &exe,
+                &[
+                    "dataset",
+                    "deform",
+                    "--mesh",
+                    &arg(&mesh),
+                    "--n",
+                    "2",
+                    "--reference",
+                    "1",
+                    "--out",
+                    &arg(&data),
+                ],
+            )?;
+            (run, data.join("coarse.ply"))
+        }
+    };
+    let mut levels = Vec::new();
+    for level in 0..=args.levels {
+        let mesh = if level == 0 {
+            coarse.clone()
+        } else {
+            let fine = out.join(format!("mesh_{level}.ply"));
+            crate::demo::mfm_live(
+                &exe,
+                &[
+                    "remesh",
+                    &arg(&coarse),
+                    "--subdivide",
+                    &level.to_string(),
+                    "--out",
+                    &arg(&fine),
+                ],
+            )?;
+            fine
+        };
+        let samples = out.join(format!("samples_{level}"));
+        let call: Vec<String> = [
+            "sample",
+            "--run",
+            &arg(&run),
+            "--mesh",
+            &arg(&mesh),
+            "--noise-from",
+            &arg(&coarse),
+            "--n",
+            &args.samples.to_string(),
+            "--ply",
+            "0",
+            "--out",
+            &arg(&samples),
+        ]
+        .iter()
+        .map(|s| (*s).to_owned())
+        .collect();
+        let peak_bytes = run_measured(&exe, &call)?;
+        let timing = crate::flow_steps::read_json(&samples.join("timing.json"))?;
+        let vertices = timing["vertices"].as_u64().unwrap_or(0);
+        let seconds_per_sample = timing["seconds_per_sample"].as_f64().unwrap_or(f64::NAN);
+        let info = std::process::Command::new(&exe)
+            .args(["info", &arg(&mesh)])
+            .output()
+            .with_context(|| format!("cannot run {}", exe.display()))?;
+        let faces = String::from_utf8_lossy(&info.stdout)
+            .lines()
+            .find_map(|l| l.strip_prefix("faces"))
+            .and_then(|n| n.trim().parse().ok())
+            .unwrap_or(0);
+        println!(
+            "level {level}: {vertices} vertices, {faces} faces: {seconds_per_sample:.2} s a sample, peak {:.2} GB",
+            peak_bytes as f64 / 1e9
+        );
+        levels.push(Level {
+            level,
+            vertices,
+            faces,
+            seconds_per_sample,
+            peak_bytes,
+        });
+    }
+    let mut md = String::new();
+    writeln!(md, "# A shape model far beyond its training resolution\n")?;
+    writeln!(
+        md,
+        "`{}` sampled on its training mesh (`{}`) and on {} rounds of midpoint \
+subdivision of it, {} samples per level from the same noise (drawn on the training \
+mesh and carried: `mfm sample --noise-from`). Seconds per sample from `timing.json` \
+(everything but loading), peak memory of the sampling process. Made by `cargo xtask \
+reproduce-figures scale`; measure on an idle machine.\n",
+        run.display(),
+        coarse.display(),
+        args.levels,
+        args.samples
+    )?;
+    writeln!(
+        md,
+        "| level | vertices | faces | seconds per sample | peak memory |\n|---|---|---|---|---|"
+    )?;
+    for l in &levels {
+        writeln!(
+            md,
+            "| {} | {} | {} | {:.2} | {:.2} GB |",
+            l.level,
+            l.vertices,
+            l.faces,
+            l.seconds_per_sample,
+            l.peak_bytes as f64 / 1e9
+        )?;
+    }
+    writeln!(md)?;
+    for l in &levels {
+        writeln!(
+            md,
+            "Level {} ({} faces):\n\n![level {}](samples_{}/samples.png)\n",
+            l.level, l.faces, l.level, l.level
+        )?;
+    }
+    std::fs::write(out.join("report.md"), md)?;
+    std::fs::write(
+        out.join("report.json"),
+        serde_json::to_string_pretty(&levels)?,
+    )?;
+    println!("report: {}", out.join("report.md").display());
+    Ok(())
+}
