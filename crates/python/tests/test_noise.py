@@ -13,7 +13,8 @@ import scipy.sparse.linalg as spla
 import mfm
 from conftest import grid, jittered_sphere
 
-KINDS = ["matern", "matern:30", "white", "naive", "explicit:16:50", "matern-normalized:1e-3", "matern:0"]
+KINDS = ["matern", "matern:30", "white", "naive", "explicit:16:50", "matern-normalized:1e-3", "matern:0",
+         "matern-smooth:30:2"]
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -102,6 +103,27 @@ def test_matern_covariance_matches_the_closed_form_spectrum(tau):
     assert np.abs(var / theory - 1).max() < 6 * np.sqrt(2 / n)
     corr = np.corrcoef(c.T)
     assert np.abs(corr - np.eye(k)).max() < 6 / np.sqrt(n)
+
+
+def test_smooth_matern_covariance_matches_the_closed_form_spectrum():
+    """Var(phi_i^T M f) = tau^2 / (lambda_i + tau)^4 for matern-smooth:tau:2,
+    with scipy's eigenpairs; and one such sample solves (L + tau M) f_2 =
+    tau M f_1 for the Matérn sample f_1 of the same normals."""
+    V, F = jittered_sphere()
+    L, M = mfm.cotan_laplacian(V, F), mfm.mass_matrix(V, F)
+    tau, k, n = 30.0, 24, 4000
+    lam, phi = spla.eigsh(L, k=k, M=M, sigma=-1e-3, which="LM")
+    smooth = mfm.MaternNoise(V, F, kind=f"matern-smooth:{tau:g}:2", frame="as-is")
+    x = smooth.sample(n, seed=21, dtype=np.float64)[:, :, 0]
+    c = x @ (M @ phi)
+    var = (c**2).mean(axis=0)
+    theory = tau**2 / (lam + tau) ** 4
+    assert np.abs(var / theory - 1).max() < 6 * np.sqrt(2 / n)
+    f1 = mfm.MaternNoise(V, F, kind=f"matern:{tau:g}", frame="as-is").sample(3, seed=5, dtype=np.float64)[:, :, 0]
+    f2 = smooth.sample(3, seed=5, dtype=np.float64)[:, :, 0]
+    for a, b in zip(f1, f2):
+        r = (L + tau * M) @ b - tau * (M @ a)
+        assert np.linalg.norm(r) < 1e-10 * np.linalg.norm(tau * (M @ a))
 
 
 def test_spectrum_reports_what_mfm_spectrum_reports(tmp_path, cli):
