@@ -65,7 +65,11 @@ fn run_measured(exe: &Path, args: &[String]) -> Result<u64> {
     let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
     let waited = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
     if waited != pid {
-        bail!("waiting for mfm {}: {}", args.join(" "), std::io::Error::last_os_error());
+        bail!(
+            "waiting for mfm {}: {}",
+            args.join(" "),
+            std::io::Error::last_os_error()
+        );
     }
     if !(libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0) {
         bail!("mfm {} failed (wait status {status})", args.join(" "));
