@@ -198,6 +198,9 @@ impl Samples {
 #[derive(Debug)]
 pub struct TargetMesh {
     mesh: MeshTensors,
+    /// Face blocks the network runs over on a very fine mesh
+    /// ([`faces_per_block`]); `None` when the mesh fits one block.
+    blocks: Option<Vec<MeshTensors>>,
     noise: NoiseSampler,
     xyz: Tensor,
 }
@@ -206,6 +209,21 @@ impl TargetMesh {
     /// The network's view of the mesh.
     pub fn mesh_tensors(&self) -> &MeshTensors {
         &self.mesh
+    }
+
+    /// The same target with the network run over blocks of at most
+    /// `max_faces` faces ([`MeshTensors::face_blocks`]), or over the whole
+    /// mesh at once for `None`. [`Sampler::prepare`] chooses blocks of
+    /// [`faces_per_block`] faces when the mesh has more; the samples are the
+    /// same up to the order of sums over faces.
+    pub fn with_face_blocks(mut self, max_faces: Option<usize>) -> Self {
+        self.blocks = max_faces.map(|m| self.mesh.face_blocks(m));
+        self
+    }
+
+    /// How many face blocks the network runs over (1: the whole mesh).
+    pub fn face_block_count(&self) -> usize {
+        self.blocks.as_ref().map_or(1, Vec::len)
     }
 
     /// The noise sampler of the mesh.
@@ -217,6 +235,23 @@ impl TargetMesh {
     pub fn num_vertices(&self) -> usize {
         self.mesh.num_vertices()
     }
+}
+
+/// The face activations one block of faces may take in a network
+/// evaluation while sampling: 1 GiB.
+pub const SAMPLE_BLOCK_BYTES: usize = 1 << 30;
+
+/// Faces per block for a network of `width` channels: as many as take
+/// [`SAMPLE_BLOCK_BYTES`] at [`SAMPLE_BYTES_PER_FACE_CHANNEL`] (262,144 for
+/// `W = 32`), at least 1. A target mesh with more faces runs the network
+/// block by block ([`mfm_net::PoissonNet::forward_blocks`]): its memory
+/// then grows with the vertices (the vertex features and the factors), not
+/// with the faces times the width. Measured (docs/BENCHMARKS.md,
+/// "Generation at a million faces"): at 3.07M faces 69 s and 14.3 GB a
+/// sample instead of 104 s and 17.1 GB; at 1.08M faces 4.6 GB instead of
+/// 5.2-6.1 GB, for 13% more time.
+pub fn faces_per_block(width: usize) -> usize {
+    (SAMPLE_BLOCK_BYTES / (width.max(1) * SAMPLE_BYTES_PER_FACE_CHANNEL)).max(1)
 }
 
 /// `batch`, or the most samples of a network of `width` channels on a mesh
@@ -479,8 +514,12 @@ impl Sampler {
     pub fn prepare(&self, mesh: &TriMesh) -> Result<TargetMesh> {
         let framed = self.flow.frame.apply(mesh);
         let context = MeshContext::new(&framed, self.flow.noise)?;
+        let per_block = faces_per_block(self.net.config().width);
+        let blocks = (context.tensors.num_faces() > per_block)
+            .then(|| context.tensors.face_blocks(per_block));
         Ok(TargetMesh {
             mesh: context.tensors,
+            blocks,
             noise: context.noise,
             xyz: positions_tensor(&framed, self.net.device()),
         })
@@ -821,7 +860,12 @@ impl Sampler {
         let b = x.size()[0];
         let tt = Tensor::full([b], t, (Kind::Float, x.device()));
         let cond = conditioning(&self.flow, &target.xyz, &tt);
-        let out = tch::no_grad(|| self.net.forward(&target.mesh, x, Some(&cond)))?;
+        let out = tch::no_grad(|| match &target.blocks {
+            Some(blocks) => self
+                .net
+                .forward_blocks(&target.mesh, blocks, x, Some(&cond)),
+            None => self.net.forward(&target.mesh, x, Some(&cond)),
+        })?;
         if self.flow.prediction == crate::checkpoint::Prediction::Clean {
             // v = (x1_hat - x_t) / (1 - t); the ODE never evaluates t = 1
             return Ok((out.vertex - x) / (1.0 - t).max(1e-6));

@@ -580,3 +580,33 @@ fn noise_carried_to_a_refinement_is_the_coarse_noise_interpolated() {
         .unwrap_err();
     assert!(e.to_string().contains("same surface"), "{e}");
 }
+
+#[test]
+fn face_blocks_give_the_same_samples() {
+    let mesh = procedural::icosphere(2);
+    let sampler = Sampler::new(
+        affine_velocity_net(0.8, 0.25),
+        flow(NoiseKind::Matern { tau: 10.0 }, 0.15),
+    )
+    .unwrap();
+    let opts = SampleOptions {
+        steps: 3,
+        method: OdeMethod::Midpoint,
+        batch: 2,
+    };
+    let whole = sampler.prepare(&mesh).unwrap();
+    // a small mesh is one block: the network runs on it whole
+    assert_eq!(whole.face_block_count(), 1);
+    let a = sampler.sample_on(&whole, 0, 3, 5, &opts).unwrap();
+    let blocked = sampler.prepare(&mesh).unwrap().with_face_blocks(Some(77));
+    assert_eq!(blocked.face_block_count(), mesh.num_faces().div_ceil(77));
+    let b = sampler.sample_on(&blocked, 0, 3, 5, &opts).unwrap();
+    let worst = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-5, "{worst}");
+    assert_eq!(mfm_fm::sample::faces_per_block(32), 262_144);
+}

@@ -830,6 +830,62 @@ impl MeshTensors {
         self.mean.components
     }
 
+    /// The mesh's faces cut into blocks of at most `max_faces` consecutive
+    /// faces, each a [`MeshTensors`] over all `V` vertices and its own faces
+    /// only: its [`MeshTensors::gradient`], [`MeshTensors::face_mean`] and
+    /// face-to-vertex maps ([`MeshTensors::divergence`],
+    /// [`MeshTensors::paired_divergence`]) are the whole mesh's restricted
+    /// to those faces, so a per-face computation run block by block and its
+    /// divergences summed gives the whole mesh's (up to the order of the
+    /// sums). The factor, the mass and the mean removal are shared with
+    /// `self`. Inference on a very fine mesh uses them to hold the
+    /// activations of one block of faces at a time instead of all of them.
+    ///
+    /// Cost: the face tables once more, in pieces; the factor is not copied.
+    pub fn face_blocks(&self, max_faces: usize) -> Vec<MeshTensors> {
+        let max_faces = max_faces.max(1);
+        let nv = self.num_vertices;
+        (0..self.num_faces)
+            .step_by(max_faces)
+            .map(|start| {
+                let end = (start + max_faces).min(self.num_faces);
+                let faces = Arc::new(self.faces[start..end].to_vec());
+                let inc = Arc::new(Incidence::new(nv, &faces));
+                let face_ops = self.face_ops.clone().map(|op| {
+                    let per_face = op.rows * 3;
+                    Arc::new(FaceOperator::new(
+                        op.name,
+                        op.rows,
+                        nv,
+                        Arc::clone(&faces),
+                        Arc::clone(&inc),
+                        op.coef64[start * per_face..end * per_face].to_vec(),
+                        op.backend,
+                    ))
+                });
+                MeshTensors {
+                    num_vertices: nv,
+                    num_faces: end - start,
+                    gradient: face_ops[0].clone(),
+                    weighted_gradient: face_ops[1].clone(),
+                    face_mean: face_ops[2].clone(),
+                    rotated_weighted_gradient: face_ops[3].clone(),
+                    paired_weighted_gradient: PairedDivergenceOp::of(&face_ops),
+                    solve: Arc::clone(&self.solve),
+                    face_ops,
+                    solver: Arc::clone(&self.solver),
+                    mass: Arc::clone(&self.mass),
+                    face_areas_interleaved: Arc::new(
+                        self.face_areas_interleaved[2 * start..2 * end].to_vec(),
+                    ),
+                    faces,
+                    mean: Arc::clone(&self.mean),
+                    backend: self.backend,
+                }
+            })
+            .collect()
+    }
+
     /// The factor of `L + eps I` every solve on this mesh uses.
     pub fn solver(&self) -> &Arc<LaplacianSolver> {
         &self.solver

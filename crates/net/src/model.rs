@@ -329,6 +329,40 @@ impl PoissonNet {
         x: &Tensor,
         cond: Option<&Tensor>,
     ) -> Result<PoissonNetOutput> {
+        self.forward_over(mesh, None, x, cond)
+    }
+
+    /// [`PoissonNet::forward`] with every per-face computation run face
+    /// block by face block: `blocks` are [`MeshTensors::face_blocks`] of
+    /// `mesh`. Only one block's face activations (of width `W`) exist at a
+    /// time, so on a mesh of millions of faces the memory is that of a
+    /// block, not of the mesh; the vertex outputs are the same function up
+    /// to the order of the sums over faces (the Jacobian output is the
+    /// blocks' outputs concatenated). For inference: the backward pass
+    /// works, but keeps every block's activations anyway.
+    ///
+    /// # Errors
+    /// As [`PoissonNet::forward`]; [`NetError::Config`] for no blocks.
+    pub fn forward_blocks(
+        &self,
+        mesh: &MeshTensors,
+        blocks: &[MeshTensors],
+        x: &Tensor,
+        cond: Option<&Tensor>,
+    ) -> Result<PoissonNetOutput> {
+        if blocks.is_empty() {
+            return Err(NetError::Config("no face blocks to run on".into()));
+        }
+        self.forward_over(mesh, Some(blocks), x, cond)
+    }
+
+    fn forward_over(
+        &self,
+        mesh: &MeshTensors,
+        blocks: Option<&[MeshTensors]>,
+        x: &Tensor,
+        cond: Option<&Tensor>,
+    ) -> Result<PoissonNetOutput> {
         let v = mesh.num_vertices() as i64;
         let x_in = self.batched(x, "input features", v, self.config.in_channels)?;
         let b = x_in.size()[0];
@@ -372,7 +406,10 @@ impl PoissonNet {
         };
         for (k, block) in self.blocks.iter().enumerate() {
             let _s = section(format!("block{k}"));
-            h = block.forward(&h, e.as_ref(), mesh)?;
+            h = match blocks {
+                None => block.forward(&h, e.as_ref(), mesh)?,
+                Some(faces) => block.forward_blocks(&h, e.as_ref(), mesh, faces)?,
+            };
         }
         let _s = section("head");
         match &self.head {
@@ -381,15 +418,39 @@ impl PoissonNet {
                 jacobian: None,
             }),
             Head::Njf(vector, input_gradient) => {
-                let g = vector.forward(&mesh.gradient(&h)?, &h, mesh)?;
-                let g = if *input_gradient {
-                    g + mesh.gradient(&x_in)?
-                } else {
-                    g
+                let with_input = |g: Tensor, m: &MeshTensors| -> Result<Tensor> {
+                    Ok(if *input_gradient {
+                        g + m.gradient(&x_in)?
+                    } else {
+                        g
+                    })
+                };
+                let (g, div) = match blocks {
+                    None => {
+                        let g = with_input(vector.forward(&mesh.gradient(&h)?, &h, mesh)?, mesh)?;
+                        let div = mesh.divergence(&g)?;
+                        (g, div)
+                    }
+                    Some(faces) => {
+                        let mut parts = Vec::with_capacity(faces.len());
+                        let mut div: Option<Tensor> = None;
+                        for (g, m) in vector.forward_blocks(&h, faces)?.into_iter().zip(faces) {
+                            let g = with_input(g, m)?;
+                            let d = m.divergence(&g)?;
+                            div = Some(match div {
+                                Some(acc) => acc + d,
+                                None => d,
+                            });
+                            parts.push(g);
+                        }
+                        let div =
+                            div.ok_or_else(|| NetError::Config("no face blocks to run on".into()))?;
+                        (Tensor::cat(&parts, -2), div)
+                    }
                 };
                 let u = {
                     let _s = section("head.poisson");
-                    mesh.remove_mass_mean(&mesh.solve(&mesh.divergence(&g)?)?)?
+                    mesh.remove_mass_mean(&mesh.solve(&div)?)?
                 };
                 Ok(PoissonNetOutput {
                     vertex: u,

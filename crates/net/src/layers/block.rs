@@ -45,10 +45,29 @@ impl PoissonBlock {
     /// `x: [B, V, W]`, `cond: [B, V, W]` (the conditioning MLP's output) when
     /// the block is conditioned. Returns the new `[B, V, W]`.
     pub fn forward(&self, x: &Tensor, cond: Option<&Tensor>, mesh: &MeshTensors) -> Result<Tensor> {
-        let g = {
-            let _s = section("block.gradient");
-            mesh.gradient(x)?
-        };
+        self.forward_over(x, cond, mesh, None)
+    }
+
+    /// [`PoissonBlock::forward`] with the face computations run face block
+    /// by face block ([`MeshTensors::face_blocks`] of `mesh`, given as
+    /// `blocks`; see [`VectorMlp::forward_divergence_mapped_blocks`]).
+    pub fn forward_blocks(
+        &self,
+        x: &Tensor,
+        cond: Option<&Tensor>,
+        mesh: &MeshTensors,
+        blocks: &[MeshTensors],
+    ) -> Result<Tensor> {
+        self.forward_over(x, cond, mesh, Some(blocks))
+    }
+
+    fn forward_over(
+        &self,
+        x: &Tensor,
+        cond: Option<&Tensor>,
+        mesh: &MeshTensors,
+        blocks: Option<&[MeshTensors]>,
+    ) -> Result<Tensor> {
         // MLP1 reads h = [x, u, e]: with its first weight's columns split as
         // [A_x | B | A_e], `h W^T = x A_x^T + u B^T + e A_e^T`, and
         // `u B^T = remove_mean(solve(div B^T))` (module docs), so `B` folds
@@ -63,9 +82,20 @@ impl PoissonBlock {
                 &l1.ws,
             ));
         }
-        let div =
-            self.vector
-                .forward_divergence_mapped(&g, x, mesh, Some(&l1.ws.narrow(1, w, w)))?;
+        let map = l1.ws.narrow(1, w, w);
+        let div = match blocks {
+            None => {
+                let g = {
+                    let _s = section("block.gradient");
+                    mesh.gradient(x)?
+                };
+                self.vector
+                    .forward_divergence_mapped(&g, x, mesh, Some(&map))?
+            }
+            Some(blocks) => self
+                .vector
+                .forward_divergence_mapped_blocks(x, blocks, Some(&map))?,
+        };
         let ub = {
             let _s = section("block.poisson");
             mesh.remove_mass_mean(&mesh.solve(&div)?)?

@@ -56,6 +56,14 @@ impl ComplexLinear {
         map: Option<&Tensor>,
     ) -> Result<Tensor> {
         let pq = mesh.paired_divergence(g)?;
+        self.map_paired(&pq, map)
+    }
+
+    /// The layer applied to paired divergences `pq = [div g, div i g]: [B,
+    /// V, 2 C_in]` (what [`MeshTensors::paired_divergence`] returns, or its
+    /// sum over face blocks), with the channel map folded in as in
+    /// [`ComplexLinear::forward_divergence_mapped`]: `[B, V, C]`.
+    pub fn map_paired(&self, pq: &Tensor, map: Option<&Tensor>) -> Result<Tensor> {
         let w = Tensor::cat(&[self.weight.get(0), self.weight.get(1)], 1);
         let w = match map {
             Some(b) => {
@@ -71,6 +79,6 @@ impl ComplexLinear {
             }
             None => w,
         };
-        Ok(mfm_kernels::dense::linear(&pq, &w, None)?)
+        Ok(mfm_kernels::dense::linear(pq, &w, None)?)
     }
 }

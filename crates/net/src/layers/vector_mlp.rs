@@ -83,10 +83,94 @@ impl VectorMlp {
 
     /// The modulation and every layer but the last (with their
     /// nonlinearities), and the last layer.
+    /// [`VectorMlp::forward_divergence_mapped`] of the face gradients of
+    /// `x` computed face block by face block ([`MeshTensors::face_blocks`],
+    /// every block over all the vertices): the paired divergences of the
+    /// blocks are summed before the last layer, so only one block's face
+    /// activations exist at a time. The same function as the whole mesh's,
+    /// up to the order of the sums.
+    ///
+    /// # Errors
+    /// As [`VectorMlp::forward_divergence_mapped`]; [`NetError::Config`]
+    /// for no blocks.
+    pub fn forward_divergence_mapped_blocks(
+        &self,
+        x: &Tensor,
+        blocks: &[MeshTensors],
+        map: Option<&Tensor>,
+    ) -> Result<Tensor> {
+        let h = self.modulation_input(x)?;
+        let mut sum: Option<(Tensor, &ComplexLinear)> = None;
+        for block in blocks {
+            let g = {
+                let _s = section("block.gradient");
+                block.gradient(x)?
+            };
+            let (hidden, last) = self.hidden_from(&g, h.as_ref(), block)?;
+            let _s = section("vector.divergence");
+            let part = block.paired_divergence(&hidden)?;
+            sum = Some(match sum {
+                Some((acc, last)) => (acc + part, last),
+                None => (part, last),
+            });
+        }
+        let Some((pq, last)) = sum else {
+            return Err(NetError::Config("no face blocks to run on".into()));
+        };
+        let _s = section("vector.divergence");
+        last.map_paired(&pq, map)
+    }
+
+    /// [`VectorMlp::forward`] of the face gradients of `x`, face block by
+    /// face block: one `[B, 2F_b, C_out]` output per block.
+    ///
+    /// # Errors
+    /// As [`VectorMlp::forward`].
+    pub fn forward_blocks(&self, x: &Tensor, blocks: &[MeshTensors]) -> Result<Vec<Tensor>> {
+        let h = self.modulation_input(x)?;
+        blocks
+            .iter()
+            .map(|block| {
+                let (hidden, last) = self.hidden_from(&block.gradient(x)?, h.as_ref(), block)?;
+                let _s = section("vector.layers");
+                last.forward(&hidden)
+            })
+            .collect()
+    }
+
     fn hidden(
         &self,
         g: &Tensor,
         x: &Tensor,
+        mesh: &MeshTensors,
+    ) -> Result<(Tensor, &ComplexLinear)> {
+        let h = self.modulation_input(x)?;
+        self.hidden_from(g, h.as_ref(), mesh)
+    }
+
+    /// The modulation's first layer on the vertices, `Linear1(x)` (it
+    /// commutes with the face mean: an affine map, weights summing to 1),
+    /// shared by every face block; `None` without modulation.
+    fn modulation_input(&self, x: &Tensor) -> Result<Option<Tensor>> {
+        match &self.modulation {
+            Some((l1, _)) => {
+                let _s = section("vector.modulation");
+                Ok(Some(mfm_kernels::profile::timed(
+                    "vector.modulation.l1",
+                    || dense(l1, x),
+                )?))
+            }
+            None => Ok(None),
+        }
+    }
+
+    /// The hidden layers on the faces of `mesh` (the whole mesh or one face
+    /// block) from `g` and the modulation input `h`
+    /// ([`VectorMlp::modulation_input`]).
+    fn hidden_from(
+        &self,
+        g: &Tensor,
+        h: Option<&Tensor>,
         mesh: &MeshTensors,
     ) -> Result<(Tensor, &ComplexLinear)> {
         let Some((last, rest)) = self.layers.split_last() else {
@@ -94,17 +178,15 @@ impl VectorMlp {
                 "a vector MLP needs at least one layer".into(),
             ));
         };
-        let mut g = match &self.modulation {
-            Some((l1, l2)) => {
+        let mut g = match (&self.modulation, h) {
+            (Some((_, l2)), Some(h)) => {
                 let _s = section("vector.modulation");
-                // Linear1 commutes with the face mean (affine map, weights summing to 1)
-                let h = mfm_kernels::profile::timed("vector.modulation.l1", || dense(l1, x))?;
-                let s = gelu(&mesh.face_mean(&h)?);
+                let s = gelu(&mesh.face_mean(h)?);
                 let ps = mfm_kernels::profile::timed("vector.modulation.l2", || dense(l2, &s))?;
                 let _t = section("vector.modulation.apply");
                 mfm_kernels::fused::modulate(g, &ps)?
             }
-            None => g.shallow_clone(),
+            _ => g.shallow_clone(),
         };
         let _s = section("vector.layers");
         for (layer, b) in rest.iter().zip(&self.biases) {
