@@ -81,8 +81,6 @@ impl VectorMlp {
         last.forward_divergence_mapped(&hidden, mesh, map)
     }
 
-    /// The modulation and every layer but the last (with their
-    /// nonlinearities), and the last layer.
     /// [`VectorMlp::forward_divergence_mapped`] of the face gradients of
     /// `x` computed face block by face block ([`MeshTensors::face_blocks`],
     /// every block over all the vertices): the paired divergences of the
@@ -138,6 +136,8 @@ impl VectorMlp {
             .collect()
     }
 
+    /// The modulation and every layer but the last (with their
+    /// nonlinearities), and the last layer.
     fn hidden(
         &self,
         g: &Tensor,
