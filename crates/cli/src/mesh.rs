@@ -212,6 +212,12 @@ pub struct RemeshArgs {
     /// keeps the surface).
     #[arg(long, default_value_t = 0)]
     subdivide: u32,
+    /// Rounds of longest-edge bisection of the faces on one half of the
+    /// mesh (x below the split of the GMM experiment's test mesh), after
+    /// --subdivide: a non-uniform triangulation of the same surface, about
+    /// 2.5x the faces for 2 rounds.
+    #[arg(long, default_value_t = 0)]
+    refine_half: u32,
     /// Damage the mesh: small-holes, medium-holes, large-holes, partial,
     /// mild-flips, severe-flips (needs --space).
     #[arg(long, requires = "space")]
@@ -234,12 +240,24 @@ impl RemeshArgs {
                 self.subdivide
             );
         }
+        if self.refine_half > 4 {
+            bail!(
+                "--refine-half {}: at most 4 rounds (about 4x the faces of the half per 2 rounds)",
+                self.refine_half
+            );
+        }
         let inputs = [mesh_path(&self.mesh), self.space.as_deref()];
         let undo = prepare_outputs(&inputs, std::slice::from_ref(&self.out), &[])?;
         let mut mesh = load_mesh_checked(&self.mesh)?;
         let input = (mesh.num_vertices(), mesh.num_faces());
         for _ in 0..self.subdivide {
             mesh = subdivide::midpoint(&mesh)?;
+        }
+        if self.refine_half > 0 {
+            let density = mfm_data::experiment::HalfDensity::Refine {
+                rounds: self.refine_half,
+            };
+            mesh = mfm_data::experiment::GmmMeshes::from_base(mesh, density)?.test;
         }
         if let Some(name) = &self.damage {
             let damage: Damage = name.parse()?;

@@ -1318,3 +1318,44 @@ fn the_shipped_shape_model_is_small_and_samples_elephants() {
         );
     }
 }
+
+/// `mfm remesh --refine-half R`: one half of the surface refined (the GMM
+/// test mesh's recipe), after any subdivision; nothing moves, and more
+/// than 4 rounds are refused.
+#[test]
+fn remesh_refines_one_half_of_the_surface() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |s: &str| dir.path().join(s).to_string_lossy().into_owned();
+    let o = mfm(&[
+        "remesh",
+        "builtin:icosphere:2",
+        "--subdivide",
+        "1",
+        "--refine-half",
+        "2",
+        "--out",
+        &p("half.ply"),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    // 320 faces, 1280 after one subdivision; two rounds of bisection on
+    // half of them: between 1.5x and 4x as many
+    let faces: usize = text
+        .split(", ")
+        .find_map(|w| w.strip_suffix(" faces (from 162 vertices"))
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{text}"));
+    assert!((1920..5120).contains(&faces), "{faces}: {text}");
+    let o = mfm(&["info", &p("half.ply")]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = mfm(&[
+        "remesh",
+        "builtin:icosphere:2",
+        "--refine-half",
+        "5",
+        "--out",
+        &p("x.ply"),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("at most 4 rounds"), "{}", stderr(&o));
+}
