@@ -9,9 +9,9 @@
 //! with the peak resident memory of the import process
 //! (`wait4`'s `ru_maxrss`) next to the size of the `signals.npy` it wrote.
 
-use crate::flow_steps::arg;
+use crate::flow_steps::{arg, run_with_peak_memory};
 use crate::pyenv::PyEnv;
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use std::io::Write as _;
 use std::path::Path;
 use std::process::Command;
@@ -92,6 +92,8 @@ pub fn import(env: &PyEnv, args: &ImportBenchArgs) -> Result<()> {
             .args(&input)
             .args(["--out", &arg(&out)]);
         let t = Instant::now();
+        cmd.stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped());
         let peak = run_with_peak_memory(&mut cmd)?;
         let s = t.elapsed().as_secs_f64();
         println!(
@@ -165,35 +167,4 @@ fn write_mesh(path: &Path, mesh: &mfm_geometry::TriMesh, format: &str) -> Result
         mfm_meshio::write_ply(path, mesh, &[])?;
     }
     Ok(())
-}
-
-/// Runs `cmd` (its output discarded) and returns the peak resident memory
-/// of the process, in bytes.
-fn run_with_peak_memory(cmd: &mut Command) -> Result<u64> {
-    let child = cmd
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .context("cannot run mfm")?;
-    let pid = child.id() as libc::pid_t;
-    let mut status = 0;
-    // SAFETY: an all-zero rusage is a valid value for wait4 to fill.
-    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-    // SAFETY: waits for our own child; both pointers are valid for writes.
-    let waited = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
-    if waited != pid {
-        bail!(
-            "waiting for mfm failed: {}",
-            std::io::Error::last_os_error()
-        );
-    }
-    if !(libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0) {
-        let mut err = String::new();
-        if let Some(mut e) = child.stderr {
-            use std::io::Read as _;
-            let _ = e.read_to_string(&mut err);
-        }
-        bail!("mfm dataset import failed: {err}");
-    }
-    Ok(usage.ru_maxrss as u64 * 1024)
 }

@@ -14,11 +14,11 @@
 //! Measure on an otherwise idle machine: libtorch's workers slow down
 //! several times beside another busy process.
 
-use crate::flow_steps::{arg, fresh_dir, out_dir};
+use crate::flow_steps::{arg, fresh_dir, out_dir, run_with_peak_memory};
 use crate::pyenv::PyEnv;
 use anyhow::{Context, Result, bail};
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Arguments of `reproduce-figures scale`.
 #[derive(clap::Args)]
@@ -49,33 +49,6 @@ struct Level {
     faces: u64,
     seconds_per_sample: f64,
     peak_bytes: u64,
-}
-
-/// Runs `exe args` and returns its peak resident set size in bytes.
-fn run_measured(exe: &Path, args: &[String]) -> Result<u64> {
-    println!("$ mfm {}", args.join(" "));
-    let child = std::process::Command::new(exe)
-        .args(args)
-        .spawn()
-        .with_context(|| format!("cannot run {}", exe.display()))?;
-    let pid = child.id() as libc::pid_t;
-    let mut status = 0;
-    // SAFETY: a zeroed rusage is a valid out-parameter; the child is ours
-    // and waited for exactly once (here, not through `child`).
-    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-    let waited = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
-    if waited != pid {
-        bail!(
-            "waiting for mfm {}: {}",
-            args.join(" "),
-            std::io::Error::last_os_error()
-        );
-    }
-    if !(libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0) {
-        bail!("mfm {} failed (wait status {status})", args.join(" "));
-    }
-    // ru_maxrss is in KiB on Linux
-    Ok(u64::try_from(usage.ru_maxrss).unwrap_or(0) * 1024)
 }
 
 /// Runs the command (see the [module docs](self)).
@@ -114,6 +87,9 @@ pub fn scale(env: &PyEnv, args: &ScaleArgs) -> Result<()> {
             (run, data.join("coarse.ply"))
         }
     };
+    let coarse_faces = mfm_meshio::read_mesh(&coarse)
+        .with_context(|| format!("reading {}", coarse.display()))?
+        .num_faces() as u64;
     let mut levels = Vec::new();
     for level in 0..=args.levels {
         let mesh = if level == 0 {
@@ -152,19 +128,13 @@ pub fn scale(env: &PyEnv, args: &ScaleArgs) -> Result<()> {
         .iter()
         .map(|s| (*s).to_owned())
         .collect();
-        let peak_bytes = run_measured(&exe, &call)?;
+        println!("$ mfm {}", call.join(" "));
+        let peak_bytes = run_with_peak_memory(std::process::Command::new(&exe).args(&call))?;
         let timing = crate::flow_steps::read_json(&samples.join("timing.json"))?;
         let vertices = timing["vertices"].as_u64().unwrap_or(0);
         let seconds_per_sample = timing["seconds_per_sample"].as_f64().unwrap_or(f64::NAN);
-        let info = std::process::Command::new(&exe)
-            .args(["info", &arg(&mesh)])
-            .output()
-            .with_context(|| format!("cannot run {}", exe.display()))?;
-        let faces = String::from_utf8_lossy(&info.stdout)
-            .lines()
-            .find_map(|l| l.strip_prefix("faces"))
-            .and_then(|n| n.trim().parse().ok())
-            .unwrap_or(0);
+        // midpoint subdivision multiplies the faces by 4 per round
+        let faces = coarse_faces << (2 * level);
         println!(
             "level {level}: {vertices} vertices, {faces} faces: {seconds_per_sample:.2} s a sample, peak {:.2} GB",
             peak_bytes as f64 / 1e9

@@ -188,6 +188,68 @@ impl Mfm<'_> {
     }
 }
 
+/// Runs `cmd` (with the standard streams it was given) to its end and
+/// returns the peak resident memory of the process, in bytes (`wait4`);
+/// a failure is an error with the program's arguments and, when `cmd`
+/// pipes its standard error, what it wrote there.
+pub fn run_with_peak_memory(cmd: &mut std::process::Command) -> Result<u64> {
+    let call = cmd
+        .get_args()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect::<Vec<_>>()
+        .join(" ");
+    let child = cmd
+        .spawn()
+        .with_context(|| format!("cannot run {}", cmd.get_program().to_string_lossy()))?;
+    let pid = child.id() as libc::pid_t;
+    let mut status = 0;
+    // SAFETY: an all-zero rusage is a valid value for wait4 to fill.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: waits for our own child (not through `child`, which is never
+    // waited for); both pointers are valid for writes.
+    let waited = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
+    if waited != pid {
+        anyhow::bail!(
+            "waiting for mfm {call} failed: {}",
+            std::io::Error::last_os_error()
+        );
+    }
+    if !(libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0) {
+        let mut err = String::new();
+        if let Some(mut e) = child.stderr {
+            use std::io::Read as _;
+            let _ = e.read_to_string(&mut err);
+        }
+        anyhow::bail!("mfm {call} failed (wait status {status}): {err}");
+    }
+    // ru_maxrss is in KiB on Linux
+    Ok(u64::try_from(usage.ru_maxrss).unwrap_or(0) * 1024)
+}
+
+/// The arguments of `mfm train` that train `config` on `dataset` into
+/// `run`, or resume `run` when it already holds its `config.toml`.
+pub fn train_args(run: &Path, config: &Path, dataset: &Path) -> Vec<String> {
+    let (out, data) = (arg(run), arg(dataset));
+    if run.join("config.toml").is_file() {
+        ["train", "--resume", "--out", &out, "--dataset", &data]
+            .map(str::to_owned)
+            .to_vec()
+    } else {
+        let config = arg(config);
+        [
+            "train",
+            "--config",
+            &config,
+            "--dataset",
+            &data,
+            "--out",
+            &out,
+        ]
+        .map(str::to_owned)
+        .to_vec()
+    }
+}
+
 /// Reads a JSON file.
 pub fn read_json(path: &Path) -> Result<Value> {
     let text =

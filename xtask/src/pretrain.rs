@@ -12,7 +12,7 @@
 //! the shipped model as it was. Training resumes when the scratch run
 //! folder (`out/pretrain/gmm/run`) already holds checkpoints.
 
-use crate::flow_steps::{Mfm, Quality, arg, num, out_dir};
+use crate::flow_steps::{Mfm, Quality, arg, num, out_dir, train_args};
 use crate::pyenv::PyEnv;
 use anyhow::{Context, Result, bail};
 use std::fmt::Write as _;
@@ -194,25 +194,9 @@ fn install(run: &Path, dir: &str, readme: &dyn Fn() -> Result<String>) -> Result
 fn train_or_resume(mfm: &Mfm, config: &Path, dataset: &Path, run: &Path) -> Result<f64> {
     if run.join("model.safetensors").is_file() {
         println!("{} is trained already", run.display());
-    } else if run.join("config.toml").is_file() {
-        mfm.run(&[
-            "train",
-            "--resume",
-            "--out",
-            &arg(run),
-            "--dataset",
-            &arg(dataset),
-        ])?;
     } else {
-        mfm.run(&[
-            "train",
-            "--config",
-            &arg(config),
-            "--dataset",
-            &arg(dataset),
-            "--out",
-            &arg(run),
-        ])?;
+        let args = train_args(run, config, dataset);
+        mfm.run(&args.iter().map(String::as_str).collect::<Vec<_>>())?;
     }
     let log = std::fs::read_to_string(run.join("train_log.csv"))
         .with_context(|| format!("cannot read {}", run.join("train_log.csv").display()))?;

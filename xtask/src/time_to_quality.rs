@@ -293,26 +293,7 @@ fn train_for(exe: &Path, run: &Path, config: &Path, dataset: &Path, budget: f64)
         return Ok(());
     }
     let mut cmd = Command::new(exe);
-    if run.join("config.toml").is_file() {
-        cmd.args([
-            "train",
-            "--resume",
-            "--out",
-            &arg(run),
-            "--dataset",
-            &arg(dataset),
-        ]);
-    } else {
-        cmd.args([
-            "train",
-            "--config",
-            &arg(config),
-            "--dataset",
-            &arg(dataset),
-            "--out",
-            &arg(run),
-        ]);
-    }
+    cmd.args(crate::flow_steps::train_args(run, config, dataset));
     cmd.arg("--quiet").stdin(Stdio::null());
     println!(
         "$ mfm {} (for {left:.0} s)",

@@ -512,24 +512,18 @@ impl NoiseSampler {
                     ),
                 });
             }
-            NoiseKind::Matern { tau } => (
+            NoiseKind::Matern { tau } | NoiseKind::MaternSmooth { tau, .. } => (
                 Some(tau),
                 1.0,
                 Engine::Poisson {
                     poisson: screened(tau)?,
                     sqrt_mass: sqrt_mass(),
                     null_space: None,
-                    repeats: 0,
-                },
-            ),
-            NoiseKind::MaternSmooth { tau, order } => (
-                Some(tau),
-                1.0,
-                Engine::Poisson {
-                    poisson: screened(tau)?,
-                    sqrt_mass: sqrt_mass(),
-                    null_space: None,
-                    repeats: order - 1,
+                    // smooth Matérn: one solve per order
+                    repeats: match kind {
+                        NoiseKind::MaternSmooth { order, .. } => order - 1,
+                        _ => 0,
+                    },
                 },
             ),
             NoiseKind::MaternNormalized { c } => {
