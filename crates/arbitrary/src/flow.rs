@@ -33,17 +33,20 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 use tch::{Device, Kind, Tensor};
 
-use crate::predictor::{EigenPredictor, PredictorSpec, positions_tensor, prepared};
-use crate::run::{Optimization, TrainReport};
+use crate::markers::{ARBITRARY_SPEC, FolderKind};
+use crate::predictor::{EigenPredictor, PredictorSpec, prepared};
+use crate::run::{start_or_resume, train_to_end};
 use crate::sources::SourceSet;
 use crate::{Schedule, SourceFrame, finished_weights, read_json, same_config};
-use mfm_fm::checkpoint::{NET_CONFIG_FILE, WEIGHTS_FILE};
+use mfm_fm::config::OdeMethod;
 use mfm_fm::context::MeshContext;
-use mfm_fm::seeding::derived_rng;
+use mfm_fm::path::{ode_step, rectified_path};
 use mfm_fm::{FmError, Result};
+use mfm_net::mesh::positions_tensor;
+use mfm_train::TrainSummary;
+use mfm_train::checkpoint::{NET_CONFIG_FILE, WEIGHTS_FILE};
+use mfm_train::seeding::derived_rng;
 
-/// The flow run's description.
-pub const ARBITRARY_SPEC: &str = mfm_files::owned::RUN_SPECS[1];
 /// The frozen predictor's weights, copied into the flow run.
 pub const PREDICTOR_WEIGHTS: &str = "predictor.safetensors";
 /// The copied predictor's description.
@@ -104,17 +107,17 @@ impl FlowConfig {
             sigma: 5.0,
             ode_steps: 20,
             eigenvectors: true,
-            schedule: Schedule {
-                lr: 5e-4,
-                batch: 32,
-                steps: 240_000,
-                milestones: vec![40_000, 160_000],
-                gamma: 0.2,
-                grad_clip: 1.0,
-                augment: true,
-                seed: 42,
-                checkpoint_every: 10_000,
-            },
+            schedule: Schedule::step_decay(
+                5e-4,
+                32,
+                240_000,
+                vec![40_000, 160_000],
+                0.2,
+                1.0,
+                true,
+                42,
+                10_000,
+            ),
             frame: SourceFrame::Own,
         }
     }
@@ -214,7 +217,7 @@ pub fn train(
     config: &FlowConfig,
     stop: &AtomicBool,
     progress: bool,
-) -> Result<TrainReport> {
+) -> Result<TrainSummary> {
     let data = Dataset::open(dataset)?;
     let Some(pairs) = training_pairs(&data)? else {
         return Err(FmError::Config(format!(
@@ -226,7 +229,7 @@ pub fn train(
     };
     let template = data.mesh().clone();
     let identity = mfm_data::dataset::mesh_identity(&template);
-    refuse_imported(run_dir)?;
+    crate::markers::refuse_imported(run_dir)?;
     std::fs::create_dir_all(run_dir).map_err(|e| FmError::io(run_dir, e))?;
     let spec_path = run_dir.join(ARBITRARY_SPEC);
     if spec_path.is_file() {
@@ -268,7 +271,7 @@ pub fn train(
         ] {
             let (a, b) = (predictor_dir.join(from), run_dir.join(to));
             let bytes = std::fs::read(&a).map_err(|e| FmError::io(&a, e))?;
-            mfm_fm::checkpoint::write_atomic(&b, &bytes)?;
+            mfm_train::checkpoint::write_atomic(&b, &bytes)?;
         }
         mfm_files::write_json(run_dir.join(PREDICTOR_COPY_SPEC), source.spec())?;
         mfm_files::write_json(
@@ -282,7 +285,7 @@ pub fn train(
                 template: Some(identity.clone()),
             },
         )?;
-        mfm_fm::checkpoint::write_file_record(
+        mfm_train::checkpoint::write_file_record(
             run_dir,
             PREDICTOR_RECORD,
             &[PREDICTOR_WEIGHTS, PREDICTOR_NET_CONFIG, PREDICTOR_COPY_SPEC],
@@ -302,14 +305,15 @@ pub fn train(
     let (batch, sigma) = (schedule.batch, config.sigma as f32);
     let device = Device::Cpu;
     let mut eigen_cache: HashMap<usize, Tensor> = HashMap::new();
-    let mut opt = Optimization::start_or_resume(
+    let run = start_or_resume(
         run_dir,
         ARBITRARY_SPEC,
         &config.net_config(k),
         schedule,
+        "arbitrary-source flow",
         device,
     )?;
-    opt.run(stop, progress, "arbitrary-source flow", |net, step| {
+    train_to_end(run, ARBITRARY_SPEC, stop, progress, |net, step| {
         let mut rng = derived_rng(schedule.seed, PURPOSE_ITEMS, step);
         let mut total = 0.0;
         for j in 0..batch {
@@ -352,8 +356,7 @@ pub fn train(
             let x1 = ctx
                 .tensors
                 .remove_mass_mean(&positions_tensor(&target, device))?;
-            let xt = &x0 * (1.0 - t) + &x1 * t;
-            let delta = &x1 - &x0;
+            let (xt, delta) = rectified_path(&x0, &x1, t);
             let cond = conditioning(&x_src, t, &eigen);
             let out = net.forward(&ctx.tensors, &xt, Some(&cond))?;
             let l = loss::flow_matching_loss(&ctx.tensors, &out, &delta)? / batch as f64;
@@ -364,26 +367,8 @@ pub fn train(
     })
 }
 
-/// The error for training in `run_dir` when it holds an imported model
-/// ([`crate::official`]): it has no training state (no dataset, optimizer
-/// or checkpoints) to continue from.
-pub(crate) fn refuse_imported(run_dir: &Path) -> Result<()> {
-    let record = run_dir.join(mfm_fm::official::IMPORT_FILE);
-    if record.is_file() {
-        return Err(FmError::Config(format!(
-            "{} holds a model imported from the authors' checkpoint ({}): it has no training \
-             state to resume (no dataset, optimizer or checkpoints); sample it with \
-             mfm sample --run {} --source MESH, or train a new run into another folder",
-            run_dir.display(),
-            record.display(),
-            run_dir.display()
-        )));
-    }
-    Ok(())
-}
-
 fn load_copied_predictor(run_dir: &Path) -> Result<EigenPredictor> {
-    mfm_fm::checkpoint::verify_file_record(run_dir, PREDICTOR_RECORD)?;
+    mfm_train::checkpoint::verify_file_record(run_dir, PREDICTOR_RECORD)?;
     let spec: PredictorSpec = read_json(
         &run_dir.join(PREDICTOR_COPY_SPEC),
         "the copied predictor's description",
@@ -405,8 +390,8 @@ impl ArbitrarySampler {
     /// # Errors
     /// Missing or unreadable files, named; an unfinished run.
     pub fn load(run_dir: &Path) -> Result<Self> {
-        let kind = crate::folders::FolderKind::of(run_dir);
-        if kind != crate::folders::FolderKind::ArbitraryRun {
+        let kind = FolderKind::of(run_dir);
+        if kind != FolderKind::ArbitraryRun {
             return Err(FmError::RunFolder(format!(
                 "{}: {}, not an arbitrary-source run (mfm train --mode arbitrary)",
                 run_dir.display(),
@@ -523,9 +508,7 @@ impl ArbitrarySampler {
                 let x0 = Tensor::from_slice(&noise).reshape([1, v, 3]) * self.spec.config.sigma;
                 let mut x = ctx.tensors.remove_mass_mean(&x0)?;
                 for s in 0..steps {
-                    let t = s as f64 * h;
-                    let mid = &x + velocity(&x, t)? * (h / 2.0);
-                    x = &x + velocity(&mid, t + h / 2.0)? * h;
+                    x = ode_step(OdeMethod::Midpoint, &x, s as f64 * h, h, &velocity)?;
                 }
                 let x = match &centroid {
                     Some(c) => x + c,

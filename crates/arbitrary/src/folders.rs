@@ -11,136 +11,29 @@ use std::sync::atomic::AtomicBool;
 
 use mfm_data::layout::{HOLDOUT, REFERENCE};
 use mfm_data::pictures::SHOWN;
-use mfm_fm::checkpoint::WEIGHTS_FILE;
 use mfm_fm::run_folder::keep_if_progress;
 use mfm_fm::sample::sample_ply_name;
 use mfm_fm::{FmError, Result};
 use mfm_geometry::TriMesh;
 use mfm_render::{ColorRange, Panel, save_grid};
+use mfm_train::checkpoint::WEIGHTS_FILE;
 
-use crate::TrainReport;
 use crate::evaluate::{SetEvaluation, evaluate_set};
-use crate::flow::{self, ARBITRARY_SPEC, ArbitrarySampler, FlowConfig, PREDICTOR_WEIGHTS};
-use crate::predictor::{self, PREDICTOR_SPEC, PredictorConfig};
-
-/// Which of the two networks a run trains.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum RunKind {
-    /// The eigenvector predictor ([`crate::predictor`]).
-    Predictor,
-    /// The arbitrary-source flow ([`crate::flow`]).
-    Flow,
-}
-
-impl RunKind {
-    /// The file that marks a run folder of this kind.
-    pub fn spec_file(self) -> &'static str {
-        match self {
-            Self::Predictor => PREDICTOR_SPEC,
-            Self::Flow => ARBITRARY_SPEC,
-        }
-    }
-}
-
-/// What an mfm folder holds, as its marker files show: for messages that
-/// say what a folder given to a flag is and what the flag expects.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum FolderKind {
-    /// Nothing at the path.
-    Missing,
-    /// A file, not a folder.
-    File,
-    /// A flow run of `mfm train` (`config.toml` or `flow.json`).
-    FlowRun,
-    /// An eigenvector predictor run (`mfm train --mode predictor`:
-    /// [`PREDICTOR_SPEC`] without [`ARBITRARY_SPEC`]).
-    PredictorRun,
-    /// An arbitrary-source run (`mfm train --mode arbitrary`:
-    /// [`ARBITRARY_SPEC`]).
-    ArbitraryRun,
-    /// A dataset (`manifest.json`), e.g. one set of an experiment.
-    Dataset,
-    /// An experiment of `mfm dataset gmm|deform|pairs` (a `train/`,
-    /// `reference/` or `holdout/` set, or a deformation or pair space).
-    Experiment,
-    /// A folder with none of these.
-    Other,
-}
-
-impl FolderKind {
-    /// The kind of `dir`. Cost: a few `stat` calls.
-    pub fn of(dir: &Path) -> Self {
-        use mfm_data::dataset::MANIFEST_FILE;
-        use mfm_data::layout::{PAIR_SPACE, SPACE, TRAIN};
-        use mfm_fm::checkpoint::{CONFIG_FILE, FLOW_FILE};
-        if !dir.exists() {
-            return Self::Missing;
-        }
-        if !dir.is_dir() {
-            return Self::File;
-        }
-        let has = |rel: &str| dir.join(rel).exists();
-        if has(ARBITRARY_SPEC) {
-            Self::ArbitraryRun
-        } else if has(PREDICTOR_SPEC) {
-            Self::PredictorRun
-        } else if has(CONFIG_FILE) || has(FLOW_FILE) {
-            Self::FlowRun
-        } else if has(MANIFEST_FILE) {
-            Self::Dataset
-        } else if [TRAIN, REFERENCE, HOLDOUT]
-            .iter()
-            .any(|set| has(&format!("{set}/{MANIFEST_FILE}")))
-            || has(SPACE)
-            || has(PAIR_SPACE)
-        {
-            Self::Experiment
-        } else {
-            Self::Other
-        }
-    }
-
-    /// What the folder is, for a message: "an eigenvector predictor run
-    /// (mfm train --mode predictor)".
-    pub fn describe(self) -> &'static str {
-        match self {
-            Self::Missing => "nothing (no such folder)",
-            Self::File => "a file, not a folder",
-            Self::FlowRun => "a flow run (mfm train)",
-            Self::PredictorRun => "an eigenvector predictor run (mfm train --mode predictor)",
-            Self::ArbitraryRun => "an arbitrary-source run (mfm train --mode arbitrary)",
-            Self::Dataset => "a dataset folder",
-            Self::Experiment => "an experiment folder (mfm dataset gmm|deform|pairs)",
-            Self::Other => "not a folder mfm wrote",
-        }
-    }
-
-    /// The kind as a predicate, for a message: "is a dataset folder", or
-    /// "does not exist".
-    pub fn is(self) -> String {
-        match self {
-            Self::Missing => "does not exist".to_owned(),
-            other => format!("is {}", other.describe()),
-        }
-    }
-
-    /// The `mfm train` flags that continue a run of this kind, for a run
-    /// kind.
-    pub fn resume_flags(self) -> Option<&'static str> {
-        match self {
-            Self::FlowRun => Some("--resume"),
-            Self::PredictorRun => Some("--resume --mode predictor"),
-            Self::ArbitraryRun => Some("--resume --mode arbitrary"),
-            _ => None,
-        }
-    }
-}
+use crate::flow::{self, ArbitrarySampler, FlowConfig, PREDICTOR_WEIGHTS};
+use crate::markers::{ARBITRARY_SPEC, FolderKind, RunKind};
+use crate::predictor::{self, PredictorConfig};
+use mfm_train::TrainSummary;
 
 /// What a fresh run is made of.
 #[derive(Clone, Debug)]
 pub struct FreshRun {
     /// The preset, `cpu` or `paper`.
     pub preset: String,
+    /// A configuration file instead of the preset: the `config` object of
+    /// a run description ([`PredictorConfig`] or [`FlowConfig`]), as JSON
+    /// (`.json`) or TOML (any other name); its schedule may use every
+    /// setting of the training loop ([`crate::Schedule`]).
+    pub config: Option<PathBuf>,
     /// Total steps instead of the preset's.
     pub steps: Option<u64>,
     /// Seed instead of the preset's.
@@ -175,6 +68,47 @@ fn stored<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
         .map_err(|e| FmError::format(path, format!("not readable as a run specification: {e}")))
 }
 
+/// A run's configuration from `path`: JSON for a `.json` file, TOML
+/// otherwise; the schedule checked.
+fn config_file<T>(path: &Path) -> Result<T>
+where
+    T: serde::de::DeserializeOwned + HasSchedule,
+{
+    let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
+    let json = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    let config: T = if json {
+        serde_json::from_str(&text)
+            .map_err(|e| FmError::format(path, format!("not readable as a configuration: {e}")))?
+    } else {
+        toml::from_str(&text)
+            .map_err(|e| FmError::format(path, format!("not readable as a configuration: {e}")))?
+    };
+    config
+        .schedule()
+        .validate()
+        .map_err(|e| FmError::format(path, e.to_string()))?;
+    Ok(config)
+}
+
+/// The configurations that hold a [`crate::Schedule`].
+trait HasSchedule {
+    fn schedule(&self) -> &crate::Schedule;
+}
+
+impl HasSchedule for PredictorConfig {
+    fn schedule(&self) -> &crate::Schedule {
+        &self.schedule
+    }
+}
+
+impl HasSchedule for FlowConfig {
+    fn schedule(&self) -> &crate::Schedule {
+        &self.schedule
+    }
+}
+
 fn absolute(p: &Path) -> Result<PathBuf> {
     std::path::absolute(p).map_err(|e| FmError::io(p, e))
 }
@@ -191,7 +125,7 @@ impl TrainingRun {
     /// specification.
     pub fn prepare(kind: RunKind, out: &Path, fresh: Option<&FreshRun>) -> Result<Self> {
         let Some(f) = fresh else {
-            flow::refuse_imported(out)?;
+            crate::markers::refuse_imported(out)?;
             let spec = out.join(kind.spec_file());
             let plan = match kind {
                 RunKind::Predictor => {
@@ -213,13 +147,19 @@ impl TrainingRun {
         let dataset = absolute(&f.dataset)?;
         let plan = match kind {
             RunKind::Predictor => {
-                let mut c = PredictorConfig::preset(&f.preset)?;
+                let mut c = match &f.config {
+                    Some(path) => config_file::<PredictorConfig>(path)?,
+                    None => PredictorConfig::preset(&f.preset)?,
+                };
                 c.schedule.steps = f.steps.unwrap_or(c.schedule.steps);
                 c.schedule.seed = f.seed.unwrap_or(c.schedule.seed);
                 Plan::Predictor(c, dataset)
             }
             RunKind::Flow => {
-                let mut c = FlowConfig::preset(&f.preset)?;
+                let mut c = match &f.config {
+                    Some(path) => config_file::<FlowConfig>(path)?,
+                    None => FlowConfig::preset(&f.preset)?,
+                };
                 c.eigenvectors = f.eigenvectors;
                 c.schedule.steps = f.steps.unwrap_or(c.schedule.steps);
                 c.schedule.seed = f.seed.unwrap_or(c.schedule.seed);
@@ -258,7 +198,7 @@ impl TrainingRun {
     ///
     /// # Errors
     /// The training's ([`predictor::train`], [`flow::train`]).
-    pub fn train(mut self, stop: &AtomicBool, progress: bool) -> Result<TrainReport> {
+    pub fn train(mut self, stop: &AtomicBool, progress: bool) -> Result<TrainSummary> {
         let out = &self.out;
         let result = match &self.plan {
             Plan::Predictor(c, dataset) => predictor::train(out, dataset, c, stop, progress),

@@ -8,7 +8,7 @@
 //! PoissonNet under `base_model.*`, the predictor's under
 //! `eigenvecs_predictor.*`. [`import_official_arbitrary`] reads the
 //! checkpoint and its YAML configuration without Python and writes an
-//! ordinary arbitrary-source run folder ([`crate::flow::ARBITRARY_SPEC`],
+//! ordinary arbitrary-source run folder ([`crate::markers::ARBITRARY_SPEC`],
 //! `model.safetensors` + `model.json` + `model.state.json`, the predictor's
 //! `predictor.safetensors` + `predictor.json` + `predictor.spec.json` +
 //! `predictor.state.json`, and [`IMPORT_FILE`] saying where it came from)
@@ -47,7 +47,6 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use mfm_fm::checkpoint::{self, FileRecord, WEIGHTS_FILE};
 use mfm_fm::config::OdeMethod;
 use mfm_fm::official::{
     OfficialCheckpoint, OfficialExtraConfigs, OfficialOde, OfficialX0, check_extra_configs,
@@ -58,12 +57,14 @@ use mfm_geometry::TriMesh;
 use mfm_geometry::frame::SurfaceSize;
 use mfm_net::PoissonNet;
 use mfm_net::official::{OFFICIAL_PREFIX, OfficialTensor, load_official};
+use mfm_train::checkpoint::{self, FileRecord, WEIGHTS_FILE};
 use serde::{Deserialize, Serialize};
 
 use crate::flow::{
-    ARBITRARY_SPEC, ArbitrarySpec, FlowConfig, PREDICTOR_COPY_SPEC, PREDICTOR_NET_CONFIG,
-    PREDICTOR_RECORD, PREDICTOR_WEIGHTS,
+    ArbitrarySpec, FlowConfig, PREDICTOR_COPY_SPEC, PREDICTOR_NET_CONFIG, PREDICTOR_RECORD,
+    PREDICTOR_WEIGHTS,
 };
+use crate::markers::ARBITRARY_SPEC;
 use crate::predictor::{PredictorConfig, PredictorSpec};
 use crate::{Schedule, SourceFrame};
 

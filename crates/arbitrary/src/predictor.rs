@@ -24,16 +24,17 @@ use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 use tch::{Device, Kind, Tensor};
 
-use crate::run::{Optimization, TrainReport};
+use crate::markers::{FolderKind, PREDICTOR_SPEC};
+use crate::run::{start_or_resume, train_to_end};
 use crate::sources::SourceSet;
 use crate::{
     AUGMENT_SCALE, AUGMENT_SHIFT, Schedule, SourceFrame, finished_weights, read_json, same_config,
 };
-use mfm_fm::seeding::derived_rng;
 use mfm_fm::{FmError, Result};
+use mfm_net::mesh::positions_tensor;
+use mfm_train::TrainSummary;
+use mfm_train::seeding::derived_rng;
 
-/// The predictor run's description.
-pub const PREDICTOR_SPEC: &str = mfm_files::owned::RUN_SPECS[0];
 /// The training targets, `[V, k]` f64.
 pub const TARGETS_FILE: &str = "targets.npy";
 
@@ -69,17 +70,17 @@ impl PredictorConfig {
             eigenvectors: 64,
             width: 128,
             blocks: 3,
-            schedule: Schedule {
-                lr: 1e-3,
-                batch: 8,
-                steps: 240_000,
-                milestones: vec![20_000, 80_000, 200_000],
-                gamma: 0.1,
-                grad_clip: 1.0,
-                augment: true,
-                seed: 42,
-                checkpoint_every: 10_000,
-            },
+            schedule: Schedule::step_decay(
+                1e-3,
+                8,
+                240_000,
+                vec![20_000, 80_000, 200_000],
+                0.1,
+                1.0,
+                true,
+                42,
+                10_000,
+            ),
             frame: SourceFrame::Own,
         }
     }
@@ -187,14 +188,6 @@ pub(crate) fn prepared(
     Ok(positions)
 }
 
-/// Positions as a `[1, V, 3]` float tensor on `device`.
-pub(crate) fn positions_tensor(p: &[[f64; 3]], device: Device) -> Tensor {
-    let flat: Vec<f32> = p.iter().flat_map(|q| q.map(|x| x as f32)).collect();
-    Tensor::from_slice(&flat)
-        .reshape([1, p.len() as i64, 3])
-        .to_device(device)
-}
-
 /// Trains (or resumes) an eigenvector predictor in `run_dir` on the meshes
 /// of `dataset` (3-channel position signals on the template; a pairs
 /// dataset's sources and targets alike).
@@ -218,7 +211,7 @@ pub fn train(
     config: &PredictorConfig,
     stop: &AtomicBool,
     progress: bool,
-) -> Result<TrainReport> {
+) -> Result<TrainSummary> {
     let data = Dataset::open(dataset)?;
     if data.manifest().channels != 3 {
         return Err(FmError::Config(format!(
@@ -238,7 +231,7 @@ pub fn train(
             config.eigenvectors
         )));
     }
-    crate::flow::refuse_imported(run_dir)?;
+    crate::markers::refuse_imported(run_dir)?;
     std::fs::create_dir_all(run_dir).map_err(|e| FmError::io(run_dir, e))?;
     let spec_path = run_dir.join(PREDICTOR_SPEC);
     let targets_path = run_dir.join(TARGETS_FILE);
@@ -281,15 +274,16 @@ pub fn train(
     let sources = SourceSet::new(&template, NoiseKind::Naive)?;
     let schedule = &config.schedule;
     let batch = schedule.batch;
-    let mut opt = Optimization::start_or_resume(
+    let run = start_or_resume(
         run_dir,
         PREDICTOR_SPEC,
         &config.net_config(),
         schedule,
+        "predictor",
         device,
     )?;
     let n = meshes.len();
-    opt.run(stop, progress, "predictor", |net, step| {
+    train_to_end(run, PREDICTOR_SPEC, stop, progress, |net, step| {
         let mut rng = derived_rng(schedule.seed, PURPOSE_ITEMS, step);
         let mut total = 0.0;
         for _ in 0..batch {
@@ -328,8 +322,8 @@ impl EigenPredictor {
     /// # Errors
     /// Missing or unreadable files, named.
     pub fn load(run_dir: &Path) -> Result<Self> {
-        let kind = crate::folders::FolderKind::of(run_dir);
-        if kind != crate::folders::FolderKind::PredictorRun {
+        let kind = FolderKind::of(run_dir);
+        if kind != FolderKind::PredictorRun {
             return Err(FmError::RunFolder(format!(
                 "{}: {}, not an eigenvector predictor run (mfm train --mode predictor)",
                 run_dir.display(),

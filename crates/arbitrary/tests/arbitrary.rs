@@ -193,8 +193,8 @@ fn an_interrupted_run_resumes_to_the_same_weights() {
     for name in ["predictor.json", "targets.npy", "train_log.csv"] {
         std::fs::copy(whole.join(name), cut.join(name)).unwrap();
     }
-    let ck = mfm_fm::checkpoint::checkpoint_dir(&whole, 3);
-    let dest = mfm_fm::checkpoint::checkpoint_dir(&cut, 3);
+    let ck = mfm_train::checkpoint::checkpoint_dir(&whole, 3);
+    let dest = mfm_train::checkpoint::checkpoint_dir(&cut, 3);
     std::fs::create_dir_all(&dest).unwrap();
     for e in std::fs::read_dir(&ck).unwrap() {
         let e = e.unwrap();
@@ -227,4 +227,114 @@ fn an_interrupted_run_resumes_to_the_same_weights() {
     other.width = 16;
     let e = predictor::train(&cut, train.dir(), &other, &stop, false).unwrap_err();
     assert!(e.to_string().contains("another configuration"), "{e}");
+}
+
+/// The arbitrary-source trainings run on the training loop every flow run
+/// uses, so they have its features: a warm-up and cosine rate, no
+/// clipping, a weight average that the finished model is, snapshots kept
+/// at chosen steps, a log row per step; and an interrupted run with all of
+/// them on resumes to the same weights, average and log.
+#[test]
+fn a_predictor_run_has_every_feature_of_the_training_loop() {
+    let t = toy();
+    let dir = tempfile::tempdir().unwrap();
+    let train = write(&t, &dir.path().join("train"), &t.meshes.coarse, 1, 2);
+    let stop = AtomicBool::new(false);
+    let mut c = tiny_predictor();
+    c.schedule.gamma = 1.0;
+    c.schedule.lr_schedule = Some(mfm_train::LrSchedule::CosineOverRun {
+        warmup_fraction: 0.34,
+        floor: 1e-5,
+    });
+    c.schedule.grad_clip = 0.0;
+    c.schedule.ema = 0.5;
+    c.schedule.keep_checkpoints = 1;
+    c.schedule.keep_at = vec![2];
+    c.schedule.log_every = 1;
+    let whole = dir.path().join("whole");
+    let report = predictor::train(&whole, train.dir(), &c, &stop, false).unwrap();
+    assert!(report.finished);
+    let steps: Vec<u64> = mfm_train::checkpoint::list_checkpoints(&whole)
+        .unwrap()
+        .iter()
+        .map(|c| c.step)
+        .collect();
+    assert_eq!(steps, [2, 6], "the newest, and the snapshot at step 2");
+    let log = std::fs::read_to_string(whole.join("train_log.csv")).unwrap();
+    let rates: Vec<f64> = log
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(2).unwrap().parse().unwrap())
+        .collect();
+    let expected: Vec<f64> = (0..6).map(|s| c.schedule.lr_at(s)).collect();
+    assert_eq!(rates, expected, "a row per step at the cosine's rates");
+    assert!(rates[1] > rates[0] && rates[5] < rates[2], "{rates:?}");
+    // the finished model is the average: in the last checkpoint beside the
+    // trained weights, and not equal to them
+    let last = mfm_train::checkpoint::checkpoint_dir(&whole, 6);
+    let average = std::fs::read(last.join(mfm_train::checkpoint::EMA_FILE)).unwrap();
+    assert_eq!(
+        std::fs::read(whole.join("model.safetensors")).unwrap(),
+        average
+    );
+    assert_ne!(
+        std::fs::read(last.join("model.safetensors")).unwrap(),
+        average
+    );
+    // interrupted after the snapshot at step 2: the same model and log
+    let cut = dir.path().join("cut");
+    std::fs::create_dir(&cut).unwrap();
+    for name in ["predictor.json", "targets.npy", "train_log.csv"] {
+        std::fs::copy(whole.join(name), cut.join(name)).unwrap();
+    }
+    let dest = mfm_train::checkpoint::checkpoint_dir(&cut, 2);
+    std::fs::create_dir_all(&dest).unwrap();
+    let ck = mfm_train::checkpoint::checkpoint_dir(&whole, 2);
+    for e in std::fs::read_dir(&ck).unwrap() {
+        let e = e.unwrap();
+        std::fs::copy(e.path(), dest.join(e.file_name())).unwrap();
+    }
+    let resumed = predictor::train(&cut, train.dir(), &c, &stop, false).unwrap();
+    assert_eq!((resumed.start_step, resumed.end_step), (2, 6));
+    assert_eq!(
+        std::fs::read(whole.join("model.safetensors")).unwrap(),
+        std::fs::read(cut.join("model.safetensors")).unwrap()
+    );
+    let rows = |run: &Path| -> Vec<String> {
+        std::fs::read_to_string(run.join("train_log.csv"))
+            .unwrap()
+            .lines()
+            .map(|l| l.rsplit_once(',').map_or(l, |(row, _)| row).to_owned())
+            .collect()
+    };
+    assert_eq!(rows(&whole), rows(&cut));
+    // the description of a run with the loop's settings names them; one
+    // at their defaults is written as before they existed
+    let spec = std::fs::read_to_string(whole.join("predictor.json")).unwrap();
+    assert!(
+        spec.contains("\"ema\": 0.5") && spec.contains("\"keep_at\""),
+        "{spec}"
+    );
+    let plain = serde_json::to_string(&tiny_predictor()).unwrap();
+    for field in [
+        "lr_schedule",
+        "adam_beta1",
+        "ema",
+        "keep_checkpoints",
+        "keep_at",
+        "log_every",
+    ] {
+        assert!(!plain.contains(field), "{field} in {plain}");
+    }
+    // and a schedule that mixes a step decay with another rate schedule is
+    // refused, naming the fields
+    let mut both = c.clone();
+    both.schedule.milestones = vec![3];
+    let e = predictor::train(&dir.path().join("both"), train.dir(), &both, &stop, false)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("lr_schedule replaces milestones and gamma"),
+        "{e}"
+    );
 }

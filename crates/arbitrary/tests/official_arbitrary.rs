@@ -16,7 +16,8 @@ use std::process::Command;
 use mfm_arbitrary::SourceFrame;
 use mfm_arbitrary::evaluate::predictor_error_skipped;
 use mfm_arbitrary::flow::{ArbitrarySampler, FlowConfig};
-use mfm_arbitrary::folders::{FolderKind, RunKind, SampleFolder, TrainingRun, write_sample_folder};
+use mfm_arbitrary::folders::{SampleFolder, TrainingRun, write_sample_folder};
+use mfm_arbitrary::markers::{FolderKind, RunKind};
 use mfm_arbitrary::official::{
     ArbitraryImportRecord, IMPORTED_FILES, OfficialArbitraryConfig, import_official_arbitrary,
     official_model_type,

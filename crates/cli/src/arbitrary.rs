@@ -5,11 +5,11 @@
 use crate::flow::{SampleArgs, TrainArgs};
 use crate::mesh::{load_mesh_checked, mesh_path};
 use anyhow::{Context, Result, bail};
-use mfm_arbitrary::flow::{ARBITRARY_SPEC, ArbitrarySampler};
+use mfm_arbitrary::flow::ArbitrarySampler;
 use mfm_arbitrary::folders::{
-    EvalFolder, FolderKind, FreshRun, RunKind, SampleFolder, TrainingRun, evaluate_experiment,
-    write_sample_folder,
+    EvalFolder, FreshRun, SampleFolder, TrainingRun, evaluate_experiment, write_sample_folder,
 };
+use mfm_arbitrary::markers::{ARBITRARY_SPEC, FolderKind, RunKind};
 use mfm_fm::config::{DeviceChoice, OdeMethod};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -40,9 +40,14 @@ pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<bool> {
     }
     let spec_file = kind.spec_file();
     let fresh = if a.resume {
-        if a.preset.is_some() || a.seed.is_some() || a.steps.is_some() || a.no_eigenvectors {
+        if a.preset.is_some()
+            || a.config.is_some()
+            || a.seed.is_some()
+            || a.steps.is_some()
+            || a.no_eigenvectors
+        {
             bail!(
-                "--resume continues with the run's own {spec_file}; drop --preset/--seed/--steps/--no-eigenvectors"
+                "--resume continues with the run's own {spec_file}; drop --config/--preset/--seed/--steps/--no-eigenvectors"
             );
         }
         if !a.out.join(spec_file).is_file() {
@@ -74,6 +79,7 @@ pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<bool> {
         };
         Some(FreshRun {
             preset: a.preset.clone().unwrap_or_else(|| "cpu".to_owned()),
+            config: a.config.clone(),
             steps: a.steps,
             seed: a.seed,
             dataset: need(&a.dataset, "--dataset")?,
@@ -99,10 +105,7 @@ pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<bool> {
     let run = TrainingRun::prepare(kind, &a.out, fresh.as_ref())?;
     println!("{}", run.description());
     let report = run.train(stop, !a.quiet)?;
-    for s in &report.skipped_checkpoints {
-        eprintln!("warning: passed over a damaged checkpoint: {s}");
-    }
-    println!("{}", report.summary());
+    println!("{}", report.line());
     match &report.model {
         Some(m) => println!("final model: {}", m.display()),
         None => println!(

@@ -17,7 +17,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 #[derive(Args)]
 pub struct TrainArgs {
     /// Run configuration (TOML; every field has a default, unknown fields
-    /// are an error). Without it, --preset gives the configuration.
+    /// are an error). Without it, --preset gives the configuration. With
+    /// --mode predictor or arbitrary: the `config` object of a run's
+    /// predictor.json / arbitrary.json (JSON for a .json file, else TOML),
+    /// whose schedule takes every setting of the training loop (lr_schedule,
+    /// ema, adam_beta1/2, adam_eps, keep_checkpoints, keep_at, log_every).
     #[arg(long, conflicts_with = "preset")]
     pub(crate) config: Option<PathBuf>,
     /// Named configuration: `cpu` (scalar signals, minutes on a laptop),
@@ -153,7 +157,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
         let installed = ctrlc::set_handler(move || {
             if stop.swap(true, Ordering::SeqCst) {
                 let progress =
-                    mfm_fm::checkpoint::list_checkpoints(&out).is_ok_and(|c| !c.is_empty());
+                    mfm_train::checkpoint::list_checkpoints(&out).is_ok_and(|c| !c.is_empty());
                 if progress {
                     mfm_files::interrupt::clean_up_temporaries();
                     eprintln!(
@@ -208,7 +212,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
                 a.out.display()
             );
         }
-        use mfm_arbitrary::folders::FolderKind;
+        use mfm_arbitrary::markers::FolderKind;
         if a.out.join(mfm_fm::official::IMPORT_FILE).is_file() {
             bail!(
                 "--out {}: a model imported from the authors' checkpoint (mfm import): it has no \
@@ -344,10 +348,7 @@ pub fn sample(a: SampleArgs) -> Result<()> {
         }
         return crate::arbitrary::sample(&a);
     }
-    if a.run
-        .join(mfm_arbitrary::predictor::PREDICTOR_SPEC)
-        .is_file()
-    {
+    if a.run.join(mfm_arbitrary::markers::PREDICTOR_SPEC).is_file() {
         bail!(
             "--run {}: is an eigenvector predictor run (mfm train --mode predictor), which \
              generates nothing itself: train an arbitrary-source flow with it \
@@ -367,9 +368,9 @@ pub fn sample(a: SampleArgs) -> Result<()> {
     let mut sampler = match a.step {
         None => Sampler::load(&a.run, device)?,
         Some(step) => {
-            let dir = mfm_fm::checkpoint::checkpoint_dir(&a.run, step);
+            let dir = mfm_train::checkpoint::checkpoint_dir(&a.run, step);
             if !dir.is_dir() {
-                let have: Vec<String> = mfm_fm::checkpoint::list_checkpoints(&a.run)?
+                let have: Vec<String> = mfm_train::checkpoint::list_checkpoints(&a.run)?
                     .iter()
                     .map(|c| c.step.to_string())
                     .collect();

@@ -69,13 +69,15 @@
 //! assert_eq!(back, cfg);
 //! ```
 
-use std::collections::BTreeMap;
 use std::fmt;
 use std::path::{Path, PathBuf};
 
 use mfm_net::{HeadKind, PoissonNetConfig};
 use mfm_noise::NoiseKind;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+use mfm_train::LrSchedule;
+pub use mfm_train::resume::ConfigChange;
 
 use crate::error::{FmError, Result};
 
@@ -398,290 +400,6 @@ pub mod noise_kind_string {
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<NoiseKind, D::Error> {
         let s = String::deserialize(d)?;
         s.parse().map_err(serde::de::Error::custom)
-    }
-}
-
-/// The learning rate as a function of the step.
-///
-/// In TOML: `{ milestones = [[STEP, LR], ...] }` (from step `STEP` on, the
-/// rate is `LR`; steps ascending; an empty list is a constant rate) or
-/// `{ decay = FACTOR, at = [STEP, ...] }` (the base rate times
-/// `FACTOR^(number of listed steps <= step)`) or `{ warmup = W, cosine =
-/// END, floor = LR }` (linear warm-up over the first `W` steps, then a
-/// half cosine from the base rate down to `LR` at step `END`, `LR` after)
-/// or `{ warmup_fraction = F, floor = LR }` (the same over the whole run:
-/// warm-up over the first `round(F * train.steps)` steps, the cosine
-/// reaching `LR` at `train.steps`, so the schedule follows `--steps`).
-/// Steps count from 0.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(try_from = "LrScheduleRepr", into = "LrScheduleRepr")]
-pub enum LrSchedule {
-    /// `(step, lr)` pairs, ascending in step.
-    Milestones(Vec<(u64, f64)>),
-    /// Multiply by `factor` at each of the steps `at` (ascending).
-    Decay {
-        /// The factor.
-        factor: f64,
-        /// The steps.
-        at: Vec<u64>,
-    },
-    /// Step `s < warmup`: `base (s + 1) / warmup`; then
-    /// `floor + (base - floor) (1 + cos(pi (s - warmup) / (end - warmup))) / 2`
-    /// until `end`, and `floor` from `end` on.
-    Cosine {
-        /// Warm-up steps (0: none).
-        warmup: u64,
-        /// The step the cosine reaches `floor` (`> warmup`).
-        end: u64,
-        /// The final rate (`>= 0`).
-        floor: f64,
-    },
-    /// [`LrSchedule::Cosine`] stretched over the run: warm-up over the
-    /// first `round(warmup_fraction * steps)` steps, the cosine ending at
-    /// `steps` (the run's `train.steps`).
-    CosineOverRun {
-        /// The warm-up's share of the run, in `[0, 1)`.
-        warmup_fraction: f64,
-        /// The final rate (`>= 0`).
-        floor: f64,
-    },
-}
-
-impl Default for LrSchedule {
-    /// The paper's: `1e-4` from step 40,000 on.
-    fn default() -> Self {
-        Self::Milestones(vec![(40_000, 1e-4)])
-    }
-}
-
-impl LrSchedule {
-    /// A constant rate.
-    pub fn constant() -> Self {
-        Self::Milestones(Vec::new())
-    }
-
-    /// The rate at `step` (0-based) for the base rate `base` in a run of
-    /// `steps` steps (only [`LrSchedule::CosineOverRun`] depends on it).
-    pub fn lr(&self, base: f64, step: u64, steps: u64) -> f64 {
-        match self {
-            Self::Milestones(m) => m
-                .iter()
-                .take_while(|(s, _)| *s <= step)
-                .last()
-                .map_or(base, |(_, lr)| *lr),
-            Self::Decay { factor, at } => {
-                let n = at.iter().filter(|&&s| s <= step).count();
-                base * factor.powi(n as i32)
-            }
-            Self::Cosine { warmup, end, floor } => warm_cosine(base, step, *warmup, *end, *floor),
-            Self::CosineOverRun {
-                warmup_fraction,
-                floor,
-            } => {
-                let warmup = (warmup_fraction * steps as f64).round() as u64;
-                warm_cosine(base, step, warmup, steps, *floor)
-            }
-        }
-    }
-
-    fn validate(&self) -> std::result::Result<(), String> {
-        let ascending = |steps: &mut dyn Iterator<Item = u64>| {
-            let v: Vec<u64> = steps.collect();
-            v.windows(2).all(|w| w[0] < w[1])
-        };
-        match self {
-            Self::Milestones(m) => {
-                if !ascending(&mut m.iter().map(|(s, _)| *s)) {
-                    return Err("milestone steps must be strictly ascending".into());
-                }
-                if let Some((s, lr)) = m.iter().find(|(_, lr)| !(lr.is_finite() && *lr > 0.0)) {
-                    return Err(format!(
-                        "milestone at step {s}: lr must be finite and > 0, found {lr}"
-                    ));
-                }
-            }
-            Self::Decay { factor, at } => {
-                if !(factor.is_finite() && *factor > 0.0) {
-                    return Err(format!("decay must be finite and > 0, found {factor}"));
-                }
-                if !ascending(&mut at.iter().copied()) {
-                    return Err("decay steps `at` must be strictly ascending".into());
-                }
-            }
-            Self::CosineOverRun {
-                warmup_fraction,
-                floor,
-            } => {
-                if !(warmup_fraction.is_finite() && (0.0..1.0).contains(warmup_fraction)) {
-                    return Err(format!(
-                        "cosine: `warmup_fraction` must be in [0, 1), found {warmup_fraction}"
-                    ));
-                }
-                if !(floor.is_finite() && *floor >= 0.0) {
-                    return Err(format!(
-                        "cosine: `floor` must be finite and >= 0, found {floor}"
-                    ));
-                }
-            }
-            Self::Cosine { warmup, end, floor } => {
-                if end <= warmup {
-                    return Err(format!(
-                        "cosine: `cosine` (the end step, {end}) must be above `warmup` ({warmup})"
-                    ));
-                }
-                if !(floor.is_finite() && *floor >= 0.0) {
-                    return Err(format!(
-                        "cosine: `floor` must be finite and >= 0, found {floor}"
-                    ));
-                }
-            }
-        }
-        Ok(())
-    }
-}
-
-/// Linear warm-up over `warmup` steps to `base`, then a half cosine down to
-/// `floor` at step `end`, `floor` from `end` on (and right after a warm-up
-/// that fills the run).
-fn warm_cosine(base: f64, step: u64, warmup: u64, end: u64, floor: f64) -> f64 {
-    if step < warmup {
-        base * (step + 1) as f64 / warmup as f64
-    } else if step >= end {
-        floor
-    } else {
-        let f = (step - warmup) as f64 / (end - warmup) as f64;
-        floor + (base - floor) * 0.5 * (1.0 + (std::f64::consts::PI * f).cos())
-    }
-}
-
-/// The TOML form of [`LrSchedule`] (one table, checked on conversion).
-#[derive(Clone, Debug, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct LrScheduleRepr {
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    milestones: Option<Vec<(u64, f64)>>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    decay: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    at: Option<Vec<u64>>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    warmup: Option<u64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    cosine: Option<u64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    warmup_fraction: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    floor: Option<f64>,
-}
-
-impl TryFrom<LrScheduleRepr> for LrSchedule {
-    type Error = String;
-
-    fn try_from(r: LrScheduleRepr) -> std::result::Result<Self, String> {
-        if r.warmup.is_some()
-            || r.cosine.is_some()
-            || r.floor.is_some()
-            || r.warmup_fraction.is_some()
-        {
-            if r.milestones.is_some() || r.decay.is_some() || r.at.is_some() {
-                return Err(
-                    "lr_schedule: `warmup`/`warmup_fraction`/`cosine`/`floor` go alone, without `milestones`, `decay` or `at`"
-                        .into(),
-                );
-            }
-            if let Some(warmup_fraction) = r.warmup_fraction {
-                if r.warmup.is_some() || r.cosine.is_some() {
-                    return Err(
-                        "lr_schedule: `warmup_fraction` spans the run: give it without `warmup` or `cosine` (those fix the steps)"
-                            .into(),
-                    );
-                }
-                let s = Self::CosineOverRun {
-                    warmup_fraction,
-                    floor: r.floor.unwrap_or(0.0),
-                };
-                s.validate().map_err(|e| format!("lr_schedule: {e}"))?;
-                return Ok(s);
-            }
-            let Some(end) = r.cosine else {
-                return Err(
-                    "lr_schedule: a cosine schedule needs `cosine = END_STEP`, or `warmup_fraction = F` to span the run"
-                        .into(),
-                );
-            };
-            let s = Self::Cosine {
-                warmup: r.warmup.unwrap_or(0),
-                end,
-                floor: r.floor.unwrap_or(0.0),
-            };
-            s.validate().map_err(|e| format!("lr_schedule: {e}"))?;
-            return Ok(s);
-        }
-        let s = match (r.milestones, r.decay, r.at) {
-            (Some(m), None, None) => Self::Milestones(m),
-            (None, Some(factor), Some(at)) => Self::Decay { factor, at },
-            (None, Some(_), None) => return Err("lr_schedule: `decay` needs `at`".into()),
-            (None, None, Some(_)) => return Err("lr_schedule: `at` needs `decay`".into()),
-            (None, None, None) => {
-                return Err(
-                    "lr_schedule: expected `milestones = [[step, lr], ...]` or `decay` with `at`"
-                        .into(),
-                );
-            }
-            _ => {
-                return Err(
-                    "lr_schedule: give either `milestones` or `decay` with `at`, not both".into(),
-                );
-            }
-        };
-        s.validate().map_err(|e| format!("lr_schedule: {e}"))?;
-        Ok(s)
-    }
-}
-
-impl From<LrSchedule> for LrScheduleRepr {
-    fn from(s: LrSchedule) -> Self {
-        match s {
-            LrSchedule::Milestones(m) => Self {
-                milestones: Some(m),
-                decay: None,
-                at: None,
-                warmup: None,
-                cosine: None,
-                warmup_fraction: None,
-                floor: None,
-            },
-            LrSchedule::Decay { factor, at } => Self {
-                milestones: None,
-                decay: Some(factor),
-                at: Some(at),
-                warmup: None,
-                cosine: None,
-                warmup_fraction: None,
-                floor: None,
-            },
-            LrSchedule::Cosine { warmup, end, floor } => Self {
-                milestones: None,
-                decay: None,
-                at: None,
-                warmup: Some(warmup),
-                cosine: Some(end),
-                warmup_fraction: None,
-                floor: Some(floor),
-            },
-            LrSchedule::CosineOverRun {
-                warmup_fraction,
-                floor,
-            } => Self {
-                milestones: None,
-                decay: None,
-                at: None,
-                warmup: None,
-                cosine: None,
-                warmup_fraction: Some(warmup_fraction),
-                floor: Some(floor),
-            },
-        }
     }
 }
 
@@ -1292,7 +1010,10 @@ impl RunConfig {
     /// # Errors
     /// [`FmError::Files`] (`Io`) naming the file.
     pub fn write_toml_file(&self, path: impl AsRef<Path>) -> Result<()> {
-        crate::checkpoint::write_atomic(path.as_ref(), self.to_toml_string()?.as_bytes())
+        Ok(mfm_train::checkpoint::write_atomic(
+            path.as_ref(),
+            self.to_toml_string()?.as_bytes(),
+        )?)
     }
 }
 
@@ -1308,23 +1029,6 @@ pub const RESUMABLE_FIELDS: &[&str] = &[
     "train.threads",
     "train.device",
 ];
-
-/// One field that differs between two configurations.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct ConfigChange {
-    /// Dotted TOML path, e.g. `model.width`.
-    pub field: String,
-    /// The value in the first configuration (TOML; `-` when absent).
-    pub before: String,
-    /// The value in the second.
-    pub after: String,
-}
-
-impl fmt::Display for ConfigChange {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{} {} -> {}", self.field, self.before, self.after)
-    }
-}
 
 /// A TOML parse error on one line: "line L, column C: MESSAGE (`the
 /// line's text`)" instead of the parser's multi-line drawing.
@@ -1362,42 +1066,17 @@ impl RunConfig {
     /// # Errors
     /// As [`RunConfig::to_toml_string`].
     pub fn changes_to(&self, other: &RunConfig) -> Result<Vec<ConfigChange>> {
-        fn flatten(prefix: &str, v: &toml::Value, out: &mut BTreeMap<String, String>) {
-            match v {
-                toml::Value::Table(t) => {
-                    for (k, x) in t {
-                        let key = if prefix.is_empty() {
-                            k.clone()
-                        } else {
-                            format!("{prefix}.{k}")
-                        };
-                        flatten(&key, x, out);
-                    }
-                }
-                other => {
-                    out.insert(prefix.to_owned(), other.to_string());
-                }
-            }
-        }
-        let table = |c: &RunConfig| -> Result<BTreeMap<String, String>> {
+        let value = |c: &RunConfig| -> Result<serde_json::Value> {
             let v: toml::Value = toml::from_str(&c.to_toml_string()?).map_err(|e| {
                 FmError::Config(format!("internal: a configuration does not read back: {e}"))
             })?;
-            let mut out = BTreeMap::new();
-            flatten("", &v, &mut out);
-            Ok(out)
-        };
-        let (a, b) = (table(self)?, table(other)?);
-        let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
-        Ok(keys
-            .into_iter()
-            .filter(|k| a.get(*k) != b.get(*k))
-            .map(|k| ConfigChange {
-                field: k.clone(),
-                before: a.get(k).cloned().unwrap_or_else(|| "-".into()),
-                after: b.get(k).cloned().unwrap_or_else(|| "-".into()),
+            serde_json::to_value(v).map_err(|e| {
+                FmError::Config(format!(
+                    "internal: a configuration is not a JSON value: {e}"
+                ))
             })
-            .collect())
+        };
+        Ok(mfm_train::resume::changes(&value(self)?, &value(other)?))
     }
 }
 

@@ -84,6 +84,38 @@ impl From<mfm_net::KernelError> for FmError {
     }
 }
 
+/// The training loop's errors ([`mfm_train::TrainError`]) become the
+/// variants of the same name and message.
+impl From<mfm_train::TrainError> for FmError {
+    fn from(e: mfm_train::TrainError) -> Self {
+        use mfm_train::TrainError as T;
+        match e {
+            T::Config(m) => Self::Config(m),
+            T::RunFolder(m) => Self::RunFolder(m),
+            T::Diverged(m) => Self::Diverged(m),
+            T::Net(e) => Self::Net(e),
+            T::Torch(e) => Self::Torch(e),
+            T::Files(e) => Self::Files(e),
+        }
+    }
+}
+
+/// What the training loop tells a diverged step from a broken one by.
+impl mfm_train::StepError for FmError {
+    fn is_numerical(&self) -> bool {
+        matches!(self, Self::Net(_) | Self::Torch(_))
+    }
+
+    fn reports_non_finite(&self) -> bool {
+        match self {
+            Self::Net(e) => e.reports_non_finite(),
+            Self::Torch(e) => mfm_net::error::torch_reports_non_finite(e),
+            Self::Solver(e) => e.is_non_finite(),
+            _ => false,
+        }
+    }
+}
+
 impl FmError {
     /// An operating-system error on `path`: [`FmError::Files`] holding
     /// [`mfm_files::FileError::Io`], the one I/O error of every mfm crate.

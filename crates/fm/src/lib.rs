@@ -9,16 +9,15 @@
 //! arbitrary-source model, built on this crate's context, Adam, seeding
 //! and checkpoint format, is the `mfm-arbitrary` crate.
 
-pub mod adam;
 pub mod checkpoint;
 pub mod config;
 pub mod context;
 pub mod error;
 pub mod official;
+pub mod path;
 pub mod run_folder;
 pub mod sample;
 pub mod sample_folder;
-pub mod seeding;
 pub mod train;
 
 pub use error::{FmError, Result};

@@ -54,10 +54,9 @@ use mfm_noise::NoiseKind;
 use mfm_torchfile::{Checkpoint, TensorData, Value};
 use serde::{Deserialize, Serialize};
 
-use crate::checkpoint::{
-    self, CONFIG_FILE, FINAL_RECORD_FILE, FLOW_FILE, FlowSpec, NET_CONFIG_FILE, Prediction,
-    WEIGHTS_FILE,
-};
+use mfm_train::checkpoint::{self, FINAL_RECORD_FILE, NET_CONFIG_FILE, WEIGHTS_FILE};
+
+use crate::checkpoint::{CONFIG_FILE, FLOW_FILE, FlowSpec, Prediction};
 use crate::config::{FrameChoice, OdeMethod, RunConfig};
 use crate::error::{FmError, Result};
 

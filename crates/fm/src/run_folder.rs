@@ -220,7 +220,7 @@ impl RunFolder {
 /// run. Every kind of run (this crate's and the arbitrary-source model's)
 /// follows this rule.
 pub fn keep_if_progress(fresh: mfm_files::Undo, run_dir: &Path, succeeded: bool) {
-    if succeeded || checkpoint::list_checkpoints(run_dir).is_ok_and(|c| !c.is_empty()) {
+    if succeeded || mfm_train::checkpoint::list_checkpoints(run_dir).is_ok_and(|c| !c.is_empty()) {
         fresh.keep();
     }
 }

@@ -40,11 +40,14 @@ use std::time::Instant;
 
 use mfm_geometry::TriMesh;
 use mfm_geometry::frame::SurfaceSize;
+use mfm_net::mesh::positions_tensor;
 use mfm_net::{MeshTensors, PoissonNet};
 use mfm_noise::NoiseSampler;
 use tch::{Device, Kind, Tensor};
 
-use crate::checkpoint::{self, FLOW_FILE, FlowSpec, WEIGHTS_FILE};
+use mfm_train::checkpoint::{self, EMA_FILE, WEIGHTS_FILE};
+
+use crate::checkpoint::{FLOW_FILE, FlowSpec};
 use crate::config::{DeviceChoice, OdeMethod, SampleConfig};
 use crate::context::MeshContext;
 use crate::error::{FmError, Result};
@@ -270,18 +273,6 @@ pub fn batch_within_memory(faces: usize, width: usize, batch: usize) -> usize {
 /// ([`Sampler::carried_noise`]).
 pub const CARRY_TOLERANCE: f64 = 0.01;
 
-/// Vertex positions as an `f32` tensor `[1, V, 3]` on `device`.
-pub(crate) fn positions_tensor(mesh: &TriMesh, device: Device) -> Tensor {
-    let flat: Vec<f32> = mesh
-        .positions()
-        .iter()
-        .flat_map(|p| p.map(|x| x as f32))
-        .collect();
-    Tensor::from_slice(&flat)
-        .reshape([1, mesh.num_vertices() as i64, 3])
-        .to_device(device)
-}
-
 /// The conditioning of a batch: `t: [B]` broadcast to `[B, V, 1]`, preceded
 /// by the positions `xyz: [1, V, 3]` when the flow is conditioned on them
 /// (`[B, V, 4]` = `[x, y, z, t]`).
@@ -427,14 +418,14 @@ impl Sampler {
             checkpoint::verify_final_model(run_dir)?;
             return Self::load_files(&weights, &run_dir.join(FLOW_FILE), device);
         }
-        let (best, rejected) = checkpoint::newest_valid_checkpoint(run_dir)?;
+        let (best, rejected) = crate::checkpoint::newest_valid_checkpoint(run_dir)?;
         for (dir, err) in &rejected {
             eprintln!("warning: skipping checkpoint {}: {err}", dir.display());
         }
         match best {
             Some((info, _)) => Self::load_checkpoint(&info.dir, device),
             None => match rejected.into_iter().next() {
-                Some((_, err)) => Err(err),
+                Some((_, err)) => Err(err.into()),
                 None => Err(FmError::Config(format!(
                     "{} has no final model ({WEIGHTS_FILE}) and no checkpoint",
                     run_dir.display()
@@ -464,9 +455,9 @@ impl Sampler {
         average: bool,
     ) -> Result<Self> {
         let dir = dir.as_ref();
-        let state = checkpoint::verify_checkpoint(dir)?;
-        let weights = if average && state.files.contains_key(checkpoint::EMA_FILE) {
-            checkpoint::EMA_FILE
+        let state = crate::checkpoint::verify_checkpoint(dir)?;
+        let weights = if average && state.files.contains_key(EMA_FILE) {
+            EMA_FILE
         } else {
             WEIGHTS_FILE
         };
@@ -521,7 +512,7 @@ impl Sampler {
             mesh: context.tensors,
             blocks,
             noise: context.noise,
-            xyz: positions_tensor(&framed, self.net.device()),
+            xyz: positions_tensor(framed.positions(), self.net.device()),
         })
     }
 
@@ -930,13 +921,7 @@ impl Sampler {
         };
         for k in 0..options.steps {
             let t = k as f64 * h;
-            x = match options.method {
-                OdeMethod::Euler => &x + velocity(&x, t, k)? * h,
-                OdeMethod::Midpoint => {
-                    let mid = &x + velocity(&x, t, k)? * (h / 2.0);
-                    &x + velocity(&mid, t + h / 2.0, k)? * h
-                }
-            };
+            x = crate::path::ode_step(options.method, &x, t, h, |x, t| velocity(x, t, k))?;
             on_step();
         }
         if !bool::try_from(x.isfinite().all()).unwrap_or(false) {

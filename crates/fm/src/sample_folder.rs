@@ -13,7 +13,9 @@ use std::path::{Path, PathBuf};
 
 use mfm_geometry::TriMesh;
 
-use crate::checkpoint::{CHECKPOINTS_DIR, CONFIG_FILE, FLOW_FILE, NET_CONFIG_FILE, WEIGHTS_FILE};
+use mfm_train::checkpoint::{CHECKPOINTS_DIR, NET_CONFIG_FILE, WEIGHTS_FILE};
+
+use crate::checkpoint::{CONFIG_FILE, FLOW_FILE};
 use crate::config::RunConfig;
 use crate::error::{FmError, Result};
 use crate::sample::{

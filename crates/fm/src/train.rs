@@ -66,36 +66,31 @@
 //! println!("{:.3} s/step", summary.seconds_per_step);
 //! ```
 
-use std::collections::BTreeMap;
-use std::fs::OpenOptions;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
+use std::sync::atomic::AtomicBool;
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use mfm_geometry::TriMesh;
 use mfm_geometry::frame::{CanonicalFrame, SurfaceSize};
+use mfm_net::mesh::positions_tensor;
 use mfm_net::{MeshTensors, PoissonNet, loss};
 use mfm_noise::NoiseSampler;
+use mfm_train::checkpoint::{self, WEIGHTS_FILE};
+use mfm_train::resume::{self, ResumePolicy};
+use mfm_train::seeding::derived_rng;
+use mfm_train::{LoopConfig, Objective, RunNames, TrainingLoop};
 use rand::Rng;
 use tch::{Device, Tensor};
 
-pub use crate::adam::Adam;
-use crate::checkpoint::{
-    self, CONFIG_FILE, CheckpointState, EMA_FILE, FLOW_FILE, FlowSpec, LOG_FILE, LogAccumulator,
-    OPTIMIZER_FILE, Prediction, WEIGHTS_FILE,
-};
+pub use mfm_train::TrainSummary;
+
+use crate::checkpoint::{CONFIG_FILE, FLOW_FILE, FlowSpec, Prediction};
 use crate::config::{CLEAN_WEIGHT_MAX, DeviceChoice, FrameChoice, NoiseScale, RunConfig};
 use crate::context::MeshContext;
 use crate::error::{FmError, Result};
-use crate::sample::{conditioning, offset_tensor, positions_tensor};
-use crate::seeding::{INIT_LOCK, derived_rng};
+use crate::path::rectified_path;
+use crate::sample::{conditioning, offset_tensor};
 use crate::signals::{FramedPositions, SignalSource};
-
-/// Header of the training log.
-pub const LOG_HEADER: &str = "step,loss,lr,grad_norm,seconds";
 
 /// Description of the randomness recorded in every checkpoint.
 const RNG_DESCRIPTION: &str = "ChaCha8 streams keyed by (seed, purpose), stream = step or epoch; \
@@ -160,46 +155,6 @@ impl EpochOrder {
     }
 }
 
-/// What a call of [`Trainer::run`] did.
-#[derive(Clone, Debug, PartialEq)]
-pub struct TrainSummary {
-    /// Step the call started at.
-    pub start_step: u64,
-    /// Step it ended at.
-    pub end_step: u64,
-    /// The run's total steps.
-    pub total_steps: u64,
-    /// Whether the run reached its total (the final model was written).
-    pub finished: bool,
-    /// Whether the stop flag ended the call.
-    pub stopped: bool,
-    /// Wall seconds of this call's steps (checkpoints included).
-    pub seconds: f64,
-    /// `seconds / (end_step - start_step)` (0 when no step ran).
-    pub seconds_per_step: f64,
-    /// Loss of the last step, if any ran in the run so far.
-    pub last_loss: Option<f64>,
-    /// The newest checkpoint written by this call.
-    pub checkpoint: Option<PathBuf>,
-    /// The final model, when finished.
-    pub model: Option<PathBuf>,
-}
-
-impl TrainSummary {
-    /// The call on one line: steps, seconds, seconds per step, last loss.
-    pub fn line(&self) -> String {
-        format!(
-            "steps {}..{} in {:.1} s ({:.3} s/step), last loss {}",
-            self.start_step,
-            self.end_step,
-            self.seconds,
-            self.seconds_per_step,
-            self.last_loss
-                .map_or_else(|| "-".to_owned(), |l| format!("{l:.5}"))
-        )
-    }
-}
-
 /// How [`Trainer::resume`] found the run.
 #[derive(Debug)]
 pub struct ResumeInfo {
@@ -211,17 +166,10 @@ pub struct ResumeInfo {
     pub skipped: Vec<(PathBuf, FmError)>,
 }
 
-/// Statistics of one step.
-#[derive(Clone, Copy, Debug)]
-struct StepStats {
-    loss: f64,
-    grad_norm: f64,
-    lr: f64,
-}
-
-/// A training run in a run folder. See the [module docs](self).
-pub struct Trainer {
-    run_dir: PathBuf,
+/// What one flow-matching step computes: the training data, the noise
+/// and the mesh operators in the run's frame (the [`Objective`] of a
+/// [`Trainer`]'s loop).
+struct FlowObjective {
     config: RunConfig,
     flow: FlowSpec,
     device: Device,
@@ -231,28 +179,54 @@ pub struct Trainer {
     offset: Option<Tensor>,
     signals: Arc<dyn SignalSource>,
     noise: NoiseSampler,
-    net: PoissonNet,
-    /// The moving average of the weights (`train.ema > 0`).
-    ema: Option<PoissonNet>,
-    adam: Adam,
     order: EpochOrder,
-    step: u64,
-    elapsed: f64,
-    log: LogAccumulator,
-    last_loss: Option<f64>,
-    last_checkpoint_step: Option<u64>,
+}
+
+/// A training run in a run folder. See the [module docs](self).
+pub struct Trainer {
+    objective: FlowObjective,
+    run: TrainingLoop,
     resumed: Option<ResumeInfo>,
 }
 
 impl std::fmt::Debug for Trainer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Trainer")
-            .field("run_dir", &self.run_dir)
-            .field("step", &self.step)
-            .field("total_steps", &self.config.train.steps)
-            .field("device", &self.device)
-            .field("flow", &self.flow)
+            .field("run_dir", &self.run.run_dir())
+            .field("step", &self.run.step())
+            .field("total_steps", &self.objective.config.train.steps)
+            .field("device", &self.objective.device)
+            .field("flow", &self.objective.flow)
             .finish()
+    }
+}
+
+/// The loop's settings of a flow run's `[train]` table.
+fn loop_config(config: &RunConfig) -> LoopConfig {
+    let t = &config.train;
+    LoopConfig {
+        steps: t.steps,
+        lr: t.lr,
+        lr_schedule: t.lr_schedule.clone(),
+        grad_clip: t.grad_clip,
+        adam_beta1: t.adam_beta1,
+        adam_beta2: t.adam_beta2,
+        adam_eps: t.adam_eps,
+        seed: t.seed,
+        checkpoint_every: t.checkpoint_every,
+        keep_checkpoints: t.keep_checkpoints,
+        keep_at: t.keep_at.clone(),
+        log_every: t.log_every,
+        ema: t.ema,
+    }
+}
+
+/// What a flow run's messages and checkpoints call things.
+fn run_names() -> RunNames {
+    RunNames {
+        what: "training".into(),
+        lr_setting: "train.lr".into(),
+        randomness: RNG_DESCRIPTION.into(),
     }
 }
 
@@ -432,90 +406,19 @@ fn with_resumable_edits(run_dir: &Path, saved: RunConfig, step: u64) -> Result<R
     }
     let edited = RunConfig::from_toml_file(&path)?;
     let changes = saved.changes_to(&edited)?;
-    let refused: Vec<String> = changes
-        .iter()
-        .filter(|c| !crate::config::RESUMABLE_FIELDS.contains(&c.field.as_str()))
-        .map(ToString::to_string)
-        .collect();
-    if !refused.is_empty() {
-        return Err(FmError::Config(format!(
-            "{} was edited after the checkpoint at step {step}: {}; a resumed run cannot change \
-             these (only {} can): undo the edit, or start a new run with --config",
-            path.display(),
-            refused.join(", "),
-            crate::config::RESUMABLE_FIELDS.join(", ")
-        )));
-    }
-    if edited.train.steps < step {
-        return Err(FmError::Config(format!(
-            "{}: train.steps = {} is below the checkpoint's step {step}",
-            path.display(),
-            edited.train.steps
-        )));
-    }
+    resume::refuse_edits(
+        &path,
+        step,
+        &changes,
+        Some(edited.train.steps),
+        ResumePolicy {
+            resumable: crate::config::RESUMABLE_FIELDS,
+            steps_field: "train.steps",
+            otherwise: "start a new run with --config",
+        },
+    )?;
     edited.validate()?;
     Ok(edited)
-}
-
-/// The error of training step `step` that failed with `e`, read as the
-/// divergence it is: after a step with a learning rate far too large the
-/// weights are NaN or inf, or so large that the network's values overflow
-/// and a non-finite value reaches its Poisson solves. Such an error becomes
-/// [`FmError::Diverged`], "`what` diverged at step N: ...; lower `lr`",
-/// naming the weights or their largest magnitude. Any other error, and any
-/// error at step 0 (weights not yet trained), is returned unchanged.
-///
-/// Cost: one pass over the weights, on the error path only.
-pub fn divergence(net: &PoissonNet, step: u64, what: &str, lr: &str, e: FmError) -> FmError {
-    if step == 0 || !matches!(e, FmError::Net(_) | FmError::Torch(_)) {
-        return e;
-    }
-    let mut largest = 0.0f64;
-    for (name, w) in net.var_store().variables() {
-        if !bool::try_from(w.isfinite().all()).unwrap_or(false) {
-            return FmError::Diverged(format!(
-                "{what} diverged at step {step}: the weights `{name}` are NaN or inf; lower {lr} \
-                 (the last checkpoint is intact)"
-            ));
-        }
-        let m = w.abs().max().double_value(&[]);
-        largest = largest.max(m);
-    }
-    if e.to_string().contains("non-finite") {
-        return FmError::Diverged(format!(
-            "{what} diverged at step {step}: the weights grew to {largest:.2e} and the network's \
-             values overflowed ({e}); lower {lr} (the last checkpoint is intact)"
-        ));
-    }
-    e
-}
-
-/// Rewrites the log keeping the header and the rows with `step <= keep`
-/// (creates it with only the header when missing).
-pub fn truncate_log(path: &Path, keep: u64) -> Result<()> {
-    let text = match std::fs::read_to_string(path) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
-        Err(e) => return Err(FmError::io(path, e)),
-    };
-    let mut out = String::from(LOG_HEADER);
-    out.push('\n');
-    let complete = text.ends_with('\n');
-    let lines: Vec<&str> = text.lines().skip(1).collect();
-    for (i, line) in lines.iter().enumerate() {
-        // a torn last line (a killed run) or anything malformed is dropped
-        let torn = i + 1 == lines.len() && !complete;
-        let fields: Vec<&str> = line.split(',').collect();
-        let well_formed = fields.len() == 5 && fields.iter().all(|f| f.parse::<f64>().is_ok());
-        let step = fields.first().and_then(|s| s.parse::<u64>().ok());
-        if let (false, true, Some(s)) = (torn, well_formed, step) {
-            if s <= keep {
-                out.push_str(line);
-                out.push('\n');
-            }
-        }
-    }
-    checkpoint::write_atomic(path, out.as_bytes())
 }
 
 impl Trainer {
@@ -570,8 +473,9 @@ impl Trainer {
         let context = MeshContext::new(&framed_mesh, config.noise.kind)?;
         let flow = resolve_flow(&config, &context.noise, framed_signals.as_ref(), frame)?;
         flow.write(run_dir.join(FLOW_FILE))?;
-        truncate_log(&run_dir.join(LOG_FILE), 0)?;
-        Self::build(run_dir, config, flow, &framed_mesh, framed_signals, context)
+        let t = Self::build(run_dir, config, flow, &framed_mesh, framed_signals, context)?;
+        t.run.start_log()?;
+        Ok(t)
     }
 
     /// Continues the run in `run_dir` from its newest valid checkpoint, with
@@ -626,7 +530,11 @@ impl Trainer {
         };
         let run_dir = run_dir.as_ref().to_path_buf();
         checkpoint::remove_stale_temporaries(&run_dir)?;
-        let (best, skipped) = checkpoint::newest_valid_checkpoint(&run_dir)?;
+        let (best, skipped) = crate::checkpoint::newest_valid_checkpoint(&run_dir)?;
+        let skipped: Vec<(PathBuf, FmError)> = skipped
+            .into_iter()
+            .map(|(dir, e)| (dir, FmError::from(e)))
+            .collect();
         for (dir, err) in &skipped {
             eprintln!(
                 "warning: skipping checkpoint {}: {err}; falling back to an older one",
@@ -667,25 +575,7 @@ impl Trainer {
         let (framed_mesh, framed_signals) = in_frame(flow.frame, flow.positions, mesh, signals)?;
         let context = MeshContext::new(&framed_mesh, config.noise.kind)?;
         let mut t = Self::build(run_dir, config, flow, &framed_mesh, framed_signals, context)?;
-        t.net.load_weights(info.dir.join(WEIGHTS_FILE))?;
-        if let Some(avg) = &mut t.ema {
-            let path = info.dir.join(EMA_FILE);
-            if !path.is_file() {
-                return Err(FmError::format(
-                    &path,
-                    "train.ema is on but the checkpoint has no moving average (it was written \
-                     by a run without train.ema)",
-                ));
-            }
-            avg.load_weights(&path)?;
-        }
-        t.adam.load(&info.dir.join(OPTIMIZER_FILE), state.step)?;
-        t.step = state.step;
-        t.elapsed = state.elapsed_seconds;
-        t.log = state.log;
-        t.last_loss = state.last_loss;
-        t.last_checkpoint_step = Some(state.step);
-        truncate_log(&t.run_dir.join(LOG_FILE), state.step)?;
+        t.run.resume_from(&info.dir, &state)?;
         t.resumed = Some(ResumeInfo {
             checkpoint: Some(info.dir),
             step: state.step,
@@ -709,7 +599,6 @@ impl Trainer {
         signals: Arc<dyn SignalSource>,
         context: MeshContext,
     ) -> Result<Self> {
-        mfm_net::runtime::tune_allocator();
         if config.train.augment.is_active() && flow.channels != 3 {
             return Err(FmError::Config(format!(
                 "train.augment scales and shifts positions: it needs 3-channel signals, the dataset has {}",
@@ -723,85 +612,67 @@ impl Trainer {
         let net_config = config.model.net_config(flow.channels)?;
         // weights, gradients, two Adam moments and a weight average
         net_config.ensure_fits(20)?;
-        let (net, ema) = {
-            let _guard = INIT_LOCK.lock().unwrap_or_else(|p| p.into_inner());
-            // libtorch seeds are i64; the bits of the u64 seed are kept
-            tch::manual_seed(config.train.seed as i64);
-            let net = PoissonNet::new(&net_config, device)?;
-            // the average starts as a copy; building it draws from libtorch's
-            // generator too, so it happens under the same lock (another
-            // thread's seeded initialization must not see those draws)
-            let ema = if config.train.ema > 0.0 {
-                let mut avg = PoissonNet::new(&net_config, device)?;
-                avg.var_store_mut().copy(net.var_store())?;
-                Some(avg)
-            } else {
-                None
-            };
-            (net, ema)
-        };
-        let t = &config.train;
-        let adam = Adam::new(&net, t.adam_beta1, t.adam_beta2, t.adam_eps);
+        let run = TrainingLoop::new(
+            &run_dir,
+            &net_config,
+            loop_config(&config),
+            run_names(),
+            device,
+        )?;
         let MeshContext {
             noise,
             tensors: mesh_tensors,
         } = context;
-        let order = EpochOrder::new(t.seed, signals.len());
+        let order = EpochOrder::new(config.train.seed, signals.len());
         Ok(Self {
-            xyz: positions_tensor(mesh, device),
-            offset: if flow.centered {
-                None
-            } else {
-                offset_tensor(&flow, device)
+            objective: FlowObjective {
+                xyz: positions_tensor(mesh.positions(), device),
+                offset: if flow.centered {
+                    None
+                } else {
+                    offset_tensor(&flow, device)
+                },
+                flow,
+                device,
+                mesh: mesh_tensors,
+                signals,
+                noise,
+                order,
+                config,
             },
-            run_dir,
-            flow,
-            device,
-            mesh: mesh_tensors,
-            signals,
-            noise,
-            net,
-            ema,
-            adam,
-            order,
-            step: 0,
-            elapsed: 0.0,
-            log: LogAccumulator::default(),
-            last_loss: None,
-            last_checkpoint_step: None,
+            run,
             resumed: None,
-            config,
         })
     }
 
     /// The run folder.
     pub fn run_dir(&self) -> &Path {
-        &self.run_dir
+        self.run.run_dir()
     }
 
     /// The configuration.
     pub fn config(&self) -> &RunConfig {
-        &self.config
+        &self.objective.config
     }
 
     /// The resolved flow spec.
     pub fn flow(&self) -> &FlowSpec {
-        &self.flow
+        &self.objective.flow
     }
 
     /// The network being trained.
     pub fn net(&self) -> &PoissonNet {
-        &self.net
+        self.run.net()
     }
 
     /// The device training runs on.
     pub fn device(&self) -> Device {
-        self.device
+        self.objective.device
     }
 
     /// Steps completed.
     pub fn step(&self) -> u64 {
-        self.step
+        self.run.step()
     }
 
     /// How [`Trainer::resume`] found the run (`None` for a new run).
@@ -817,16 +688,57 @@ impl Trainer {
     /// [`FmError::Config`] for 0 or a total below the current step; I/O
     /// errors.
     pub fn set_total_steps(&mut self, steps: u64) -> Result<()> {
-        if steps == 0 || steps < self.step {
+        if steps == 0 || steps < self.run.step() {
             return Err(FmError::Config(format!(
                 "train.steps must be at least 1 and at least the current step {}, found {steps}",
-                self.step
+                self.run.step()
             )));
         }
-        self.config.train.steps = steps;
-        self.config.write_toml_file(self.run_dir.join(CONFIG_FILE))
+        self.run.set_total_steps(steps)?;
+        self.objective.config.train.steps = steps;
+        self.objective
+            .config
+            .write_toml_file(self.run.run_dir().join(CONFIG_FILE))
     }
 
+    /// The weights sampling uses: the moving average when `train.ema` is
+    /// on, else the trained weights.
+    pub fn sampling_net(&self) -> &PoissonNet {
+        self.run.sampling_net()
+    }
+
+    /// Trains to the configured total; see [`Trainer::run_until`].
+    ///
+    /// # Errors
+    /// See [`Trainer::run_until`].
+    pub fn run(&mut self, stop: &AtomicBool, progress: bool) -> Result<TrainSummary> {
+        self.run_until(self.objective.config.train.steps, stop, progress)
+    }
+
+    /// Trains until step `until` (capped at the total), `stop` is set, or an
+    /// error occurs ([`TrainingLoop::run_until`]). Checkpoints every
+    /// `checkpoint_every` steps and at `keep_at`; at the end of the call
+    /// (target reached or stopped) a checkpoint of the current step is
+    /// written if there is none yet; at the total, the final model goes to
+    /// `run_dir/model.safetensors` (+ `model.json`). `progress` shows a
+    /// progress bar on standard error with the loss and steps/s.
+    ///
+    /// # Errors
+    /// Data, noise, network and I/O errors; [`FmError::Diverged`] when the
+    /// loss or the weights stop being finite (nothing is written for that
+    /// step).
+    pub fn run_until(
+        &mut self,
+        until: u64,
+        stop: &AtomicBool,
+        progress: bool,
+    ) -> Result<TrainSummary> {
+        self.run
+            .run_until(until, &mut self.objective, stop, progress)
+    }
+}
+
+impl FlowObjective {
     /// Signal indices, times and noise sample range of step `step` (a pure
     /// function of the seed and the step).
     fn step_inputs(&mut self, step: u64) -> (Vec<usize>, Vec<f32>) {
@@ -859,9 +771,8 @@ impl Trainer {
         Some((scales.to_device(self.device), shifts.to_device(self.device)))
     }
 
-    /// Runs optimizer step `self.step`.
-    fn train_step(&mut self) -> Result<StepStats> {
-        let s = self.step;
+    /// The forward and backward passes of step `s` on `net`.
+    fn train_step(&mut self, net: &PoissonNet, s: u64) -> Result<f64> {
         let b = self.config.train.batch;
         let (v, c) = (self.signals.num_vertices(), self.flow.channels);
         let (idx, times) = self.step_inputs(s);
@@ -900,12 +811,10 @@ impl Trainer {
         } else {
             (x0, x1)
         };
-        let xt = &x0 * (1.0 - &tb) + &x1 * &tb;
-        let delta = &x1 - &x0;
+        let (xt, delta) = rectified_path(&x0, &x1, &tb);
         let cond = conditioning(&self.flow, &xyz, &t);
 
-        self.adam.zero_grad();
-        let mut out = self.net.forward(&self.mesh, &xt, Some(&cond))?;
+        let mut out = net.forward(&self.mesh, &xt, Some(&cond))?;
         if let Some(o) = &self.offset {
             out.vertex = &out.vertex + o;
         }
@@ -935,209 +844,30 @@ impl Trainer {
             }
         };
         let loss = loss_t.to_device(Device::Cpu).double_value(&[]);
-        if !loss.is_finite() {
-            return Err(FmError::Diverged(format!(
-                "training diverged at step {s}: the loss is {loss}; lower train.lr or check the data (the last checkpoint is intact)"
-            )));
+        // a non-finite loss goes back without the backward pass: the loop
+        // stops there, before any update
+        if loss.is_finite() {
+            loss_t.f_backward()?;
         }
-        loss_t.f_backward()?;
-        let grad_norm = self.adam.clip_grad_norm(self.config.train.grad_clip)?;
-        let lr = self.config.train.lr_at(s);
-        self.adam.step(lr)?;
-        self.update_ema(s + 1)?;
-        Ok(StepStats {
-            loss,
-            grad_norm,
-            lr,
-        })
+        Ok(loss)
+    }
+}
+
+impl Objective for FlowObjective {
+    type Error = FmError;
+
+    fn step(&mut self, net: &PoissonNet, step: u64) -> Result<f64> {
+        self.train_step(net, step)
     }
 
-    /// Moves the weight average towards the weights after step `k`
-    /// (1-based): `w <- d w + (1 - d) p`, `d = min(ema, (1 + k) / (10 + k))`.
-    fn update_ema(&mut self, k: u64) -> Result<()> {
-        let Some(avg) = &mut self.ema else {
-            return Ok(());
-        };
-        let warm = (1.0 + k as f64) / (10.0 + k as f64);
-        let d = self.config.train.ema.min(warm);
-        let trained = self.net.var_store().variables();
-        tch::no_grad(|| -> Result<()> {
-            for (name, mut w) in avg.var_store().variables() {
-                let p = trained.get(&name).ok_or_else(|| {
-                    FmError::Config(format!(
-                        "the weight average has a variable {name} the network lacks"
-                    ))
-                })?;
-                let _ = w.f_mul_scalar_(d)?;
-                let _ = w.f_add_(&(p * (1.0 - d)))?;
-            }
-            Ok(())
-        })
-    }
-
-    /// The weights sampling uses: the moving average when `train.ema` is
-    /// on, else the trained weights.
-    pub fn sampling_net(&self) -> &PoissonNet {
-        self.ema.as_ref().unwrap_or(&self.net)
-    }
-
-    /// Writes the checkpoint of the current step and prunes old ones.
-    fn write_checkpoint(&mut self) -> Result<PathBuf> {
-        let state = CheckpointState {
-            format: checkpoint::STATE_FORMAT,
-            step: self.step,
-            seed: self.config.train.seed,
-            rng: RNG_DESCRIPTION.into(),
-            elapsed_seconds: self.elapsed,
-            last_loss: self.last_loss,
-            log: self.log,
-            files: BTreeMap::new(),
-        };
-        let (net, adam, config, flow) = (&self.net, &self.adam, &self.config, &self.flow);
-        let ema = self.ema.as_ref();
-        let dir = checkpoint::write_checkpoint(&self.run_dir, state, |tmp| {
-            net.save(tmp.join(WEIGHTS_FILE))?;
-            if let Some(avg) = ema {
-                avg.save(tmp.join(EMA_FILE))?;
-            }
-            adam.save(&tmp.join(OPTIMIZER_FILE))?;
-            config.write_toml_file(tmp.join(CONFIG_FILE))?;
-            flow.write(tmp.join(FLOW_FILE))
-        })?;
-        checkpoint::prune_checkpoints_keeping(
-            &self.run_dir,
-            self.config.train.keep_checkpoints,
-            &self.config.train.keep_at,
-        )?;
-        self.last_checkpoint_step = Some(self.step);
-        Ok(dir)
-    }
-
-    /// Trains to the configured total; see [`Trainer::run_until`].
-    ///
-    /// # Errors
-    /// See [`Trainer::run_until`].
-    pub fn run(&mut self, stop: &AtomicBool, progress: bool) -> Result<TrainSummary> {
-        self.run_until(self.config.train.steps, stop, progress)
-    }
-
-    /// Trains until step `until` (capped at the total), `stop` is set, or an
-    /// error occurs. Checkpoints every `checkpoint_every` steps; at the
-    /// end of the call (target reached or stopped) a checkpoint of the
-    /// current step is written if there is none yet; at the total, the final
-    /// model goes to `run_dir/model.safetensors` (+ `model.json`). `progress`
-    /// shows a progress bar on standard error with the loss and steps/s.
-    ///
-    /// # Errors
-    /// Data, noise, network and I/O errors; [`FmError::Config`] when the
-    /// loss stops being finite (nothing is written for that step).
-    pub fn run_until(
-        &mut self,
-        until: u64,
-        stop: &AtomicBool,
-        progress: bool,
-    ) -> Result<TrainSummary> {
-        let total = self.config.train.steps;
-        let end = until.min(total);
-        let start_step = self.step;
-        let target = if progress {
-            ProgressDrawTarget::stderr()
-        } else {
-            ProgressDrawTarget::hidden()
-        };
-        let bar = ProgressBar::with_draw_target(Some(total), target).with_position(start_step);
-        if let Ok(style) =
-            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} eta {eta} {msg}")
-        {
-            bar.set_style(style.progress_chars("=> "));
-        }
-        bar.reset_eta();
-        let log_path = self.run_dir.join(LOG_FILE);
-        let mut log_file = OpenOptions::new()
-            .append(true)
-            .create(true)
-            .open(&log_path)
-            .map_err(|e| FmError::io(&log_path, e))?;
-        let session = Instant::now();
-        let base_elapsed = self.elapsed;
-        let mut stopped = false;
-        let mut checkpoint_dir = None;
-        let (every, log_every) = (
-            self.config.train.checkpoint_every,
-            self.config.train.log_every,
-        );
-        while self.step < end {
-            if stop.load(Ordering::Relaxed) {
-                stopped = true;
-                break;
-            }
-            let stats = self
-                .train_step()
-                .map_err(|e| divergence(&self.net, self.step, "training", "train.lr", e))?;
-            self.step += 1;
-            self.last_loss = Some(stats.loss);
-            self.log.loss_sum += stats.loss;
-            self.log.grad_norm_sum += stats.grad_norm;
-            self.log.count += 1;
-            self.elapsed = base_elapsed + session.elapsed().as_secs_f64();
-            if self.step % log_every == 0 || self.step == total {
-                let n = self.log.count.max(1) as f64;
-                let row = format!(
-                    "{},{},{},{},{:.3}\n",
-                    self.step,
-                    self.log.loss_sum / n,
-                    stats.lr,
-                    self.log.grad_norm_sum / n,
-                    self.elapsed
-                );
-                log_file
-                    .write_all(row.as_bytes())
-                    .and_then(|()| log_file.flush())
-                    .map_err(|e| FmError::io(&log_path, e))?;
-                self.log = LogAccumulator::default();
-            }
-            let done = (self.step - start_step) as f64;
-            bar.set_position(self.step);
-            bar.set_message(format!(
-                "loss {:.4e} lr {:.1e} {:.2} steps/s",
-                stats.loss,
-                stats.lr,
-                done / session.elapsed().as_secs_f64().max(1e-9)
-            ));
-            if self.step % every == 0
-                || self.step == total
-                || self.config.train.keep_at.contains(&self.step)
-            {
-                checkpoint_dir = Some(self.write_checkpoint()?);
-            }
-        }
-        if self.last_checkpoint_step != Some(self.step) {
-            checkpoint_dir = Some(self.write_checkpoint()?);
-        }
-        let finished = self.step >= total;
-        let model = if finished {
-            let path = self.run_dir.join(WEIGHTS_FILE);
-            self.sampling_net().save(&path)?;
-            checkpoint::write_final_record(&self.run_dir)?;
-            Some(path)
-        } else {
-            None
-        };
-        bar.finish_and_clear();
-        let seconds = session.elapsed().as_secs_f64();
-        let ran = self.step - start_step;
-        Ok(TrainSummary {
-            start_step,
-            end_step: self.step,
-            total_steps: total,
-            finished,
-            stopped,
-            seconds,
-            seconds_per_step: if ran > 0 { seconds / ran as f64 } else { 0.0 },
-            last_loss: self.last_loss,
-            checkpoint: checkpoint_dir,
-            model,
-        })
+    fn checkpoint_files(&self) -> Result<Vec<(String, Vec<u8>)>> {
+        Ok(vec![
+            (
+                CONFIG_FILE.to_owned(),
+                self.config.to_toml_string()?.into_bytes(),
+            ),
+            (FLOW_FILE.to_owned(), self.flow.to_json()?.into_bytes()),
+        ])
     }
 }
 
@@ -1162,21 +892,5 @@ mod tests {
         assert_eq!(b.indices(7, 3), all[21..24]);
         assert_eq!(b.indices(2, 3), all[6..9]);
         assert_ne!(EpochOrder::new(8, 10).indices(0, 10), all[..10]);
-    }
-
-    #[test]
-    fn log_truncation_keeps_rows_up_to_the_step() {
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join(LOG_FILE);
-        std::fs::write(
-            &p,
-            format!("{LOG_HEADER}\n5,1,1,1,0\n10,1,1,1,0\n15,1,1,1,0\n1"),
-        )
-        .unwrap();
-        truncate_log(&p, 10).unwrap();
-        assert_eq!(
-            std::fs::read_to_string(&p).unwrap(),
-            format!("{LOG_HEADER}\n5,1,1,1,0\n10,1,1,1,0\n")
-        );
     }
 }

@@ -13,11 +13,12 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use mfm_fm::InMemorySignals;
-use mfm_fm::checkpoint::{LOG_FILE, WEIGHTS_FILE};
-use mfm_fm::config::{DeviceChoice, LrSchedule, OdeMethod, RunConfig};
+use mfm_fm::config::{DeviceChoice, OdeMethod, RunConfig};
 use mfm_fm::sample::{SampleOptions, Sampler};
 use mfm_fm::train::Trainer;
 use mfm_geometry::{TriMesh, procedural};
+use mfm_train::LrSchedule;
+use mfm_train::checkpoint::{LOG_FILE, WEIGHTS_FILE};
 use tch::{Device, Tensor};
 
 fn signals(mesh: &TriMesh, count: usize) -> Arc<InMemorySignals> {

@@ -6,13 +6,15 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use mfm_fm::InMemorySignals;
-use mfm_fm::checkpoint::{self, FlowSpec, WEIGHTS_FILE};
-use mfm_fm::config::{DeviceChoice, LrSchedule, OdeMethod, RunConfig};
+use mfm_fm::checkpoint::{self, FlowSpec};
+use mfm_fm::config::{DeviceChoice, OdeMethod, RunConfig};
 use mfm_fm::sample::{SampleOptions, Sampler};
 use mfm_fm::train::Trainer;
 use mfm_geometry::{TriMesh, procedural};
 use mfm_net::{HeadKind, PoissonNet, PoissonNetConfig};
 use mfm_noise::{NoiseKind, NoiseSampler};
+use mfm_train::LrSchedule;
+use mfm_train::checkpoint::{self as train_checkpoint, WEIGHTS_FILE};
 use tch::{Device, Tensor};
 
 fn signals(mesh: &TriMesh, count: usize, channels: usize) -> Arc<InMemorySignals> {
@@ -135,7 +137,7 @@ fn a_trained_run_samples_on_a_refined_mesh() {
     let from_ckpt = Sampler::load(run.path(), Some(Device::Cpu)).unwrap();
     assert_eq!(from_ckpt.sample(&fine, 5, 9, &opts).unwrap().data, s.data);
     // ... unless it is damaged: then the previous one (another model)
-    let last = checkpoint::list_checkpoints(run.path())
+    let last = train_checkpoint::list_checkpoints(run.path())
         .unwrap()
         .pop()
         .unwrap();
@@ -358,7 +360,7 @@ fn runs_with_non_finite_weights_are_refused_at_load() {
     net.save(&weights).unwrap();
     // as the trainer does after saving (a diverged run's record matches its
     // NaN weights)
-    mfm_fm::checkpoint::write_final_record(run.path()).unwrap();
+    mfm_train::checkpoint::write_final_record(run.path()).unwrap();
     let err = Sampler::load(run.path(), Some(Device::Cpu)).unwrap_err();
     assert!(matches!(err, mfm_fm::FmError::Diverged(_)), "{err}");
     let msg = err.to_string();

@@ -8,11 +8,16 @@ use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use mfm_fm::checkpoint::{self, LOG_FILE, OPTIMIZER_FILE, STATE_FILE, WEIGHTS_FILE};
-use mfm_fm::config::{DeviceChoice, LrSchedule, NoiseScale, RunConfig};
-use mfm_fm::train::{LOG_HEADER, Trainer};
+use mfm_fm::checkpoint;
+use mfm_fm::config::{DeviceChoice, NoiseScale, RunConfig};
+use mfm_fm::train::Trainer;
 use mfm_fm::{FmError, InMemorySignals, SignalSource};
 use mfm_geometry::{TriMesh, procedural};
+use mfm_train::LOG_HEADER;
+use mfm_train::LrSchedule;
+use mfm_train::checkpoint::{
+    self as train_checkpoint, LOG_FILE, OPTIMIZER_FILE, STATE_FILE, WEIGHTS_FILE,
+};
 use tch::Tensor;
 
 /// `count` smooth fields on the unit sphere `mesh`, each a different blend
@@ -144,7 +149,7 @@ fn loss_decreases_on_a_few_fixed_signals() {
     );
     // the final model and a checkpoint of the last step exist
     assert!(dir.path().join(WEIGHTS_FILE).is_file());
-    let cps = checkpoint::list_checkpoints(dir.path()).unwrap();
+    let cps = train_checkpoint::list_checkpoints(dir.path()).unwrap();
     assert_eq!(cps.last().unwrap().step, 80);
 }
 
@@ -174,7 +179,7 @@ fn interrupted_and_resumed_runs_equal_the_uninterrupted_run() {
         .unwrap()
         .run_until(8, &no_stop(), false)
         .unwrap();
-    std::fs::remove_dir_all(checkpoint::checkpoint_dir(killed.path(), 8)).unwrap();
+    std::fs::remove_dir_all(train_checkpoint::checkpoint_dir(killed.path(), 8)).unwrap();
     assert!(log_rows(killed.path()).iter().any(|r| r.starts_with("6,")));
     let mut t = Trainer::resume(killed.path(), &mesh, signals.clone()).unwrap();
     assert_eq!(t.resumed().unwrap().step, 5);
@@ -201,7 +206,7 @@ fn interrupted_and_resumed_runs_equal_the_uninterrupted_run() {
     for other in [stopped.path(), killed.path(), flagged.path()] {
         assert_bit_identical(&full.path().join(WEIGHTS_FILE), &other.join(WEIGHTS_FILE));
         assert_eq!(log_rows(other), reference, "log of {}", other.display());
-        let last = |p: &Path| checkpoint::checkpoint_dir(p, 20).join(OPTIMIZER_FILE);
+        let last = |p: &Path| train_checkpoint::checkpoint_dir(p, 20).join(OPTIMIZER_FILE);
         assert_eq!(
             std::fs::read(last(full.path())).unwrap(),
             std::fs::read(last(other)).unwrap(),
@@ -236,7 +241,7 @@ fn a_run_resumed_on_another_device_choice_goes_on_there() {
     assert_eq!(t.resumed().unwrap().step, 5);
     assert_eq!(t.device(), DeviceChoice::Auto.resolve().unwrap());
     t.run(&no_stop(), false).unwrap();
-    let last = checkpoint::checkpoint_dir(moved.path(), 10);
+    let last = train_checkpoint::checkpoint_dir(moved.path(), 10);
     let stored = RunConfig::from_toml_file(last.join(checkpoint::CONFIG_FILE)).unwrap();
     assert_eq!(
         stored.train.device,
@@ -303,8 +308,8 @@ fn damaged_checkpoints_are_named_and_skipped() {
     let signals = smooth_signals(&mesh, 3, 1);
     let cfg = tiny_config(10);
     let run = trained_run(cfg.clone(), &mesh, signals.clone());
-    let c5 = checkpoint::checkpoint_dir(run.path(), 5);
-    let c10 = checkpoint::checkpoint_dir(run.path(), 10);
+    let c5 = train_checkpoint::checkpoint_dir(run.path(), 5);
+    let c10 = train_checkpoint::checkpoint_dir(run.path(), 10);
     let weights10 = c10.join(WEIGHTS_FILE);
     let intact = std::fs::read(&weights10).unwrap();
 

@@ -11,11 +11,12 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use mfm_fm::InMemorySignals;
-use mfm_fm::checkpoint::{self, EMA_FILE, WEIGHTS_FILE};
-use mfm_fm::config::{DeviceChoice, LrSchedule, RunConfig, TimeSampling};
+use mfm_fm::config::{DeviceChoice, RunConfig, TimeSampling};
 use mfm_fm::sample::Sampler;
 use mfm_fm::train::Trainer;
 use mfm_geometry::{TriMesh, procedural};
+use mfm_train::LrSchedule;
+use mfm_train::checkpoint::{self, EMA_FILE, WEIGHTS_FILE};
 use proptest::prelude::*;
 use rand::SeedableRng;
 use tch::Tensor;

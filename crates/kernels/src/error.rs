@@ -46,6 +46,29 @@ pub enum KernelError {
 /// Result alias of this crate.
 pub type Result<T, E = KernelError> = std::result::Result<T, E>;
 
+impl KernelError {
+    /// Whether this error reports a NaN or infinity reaching a sparse solve
+    /// ([`mfm_solver::SolverError::NonFinite`]): by its variant when the
+    /// solve ran in Rust, by the solver's mark in the text when it ran
+    /// inside a libtorch autograd node (whose errors cross libtorch's C++ as
+    /// text, [`KernelError::CustomOp`] or [`KernelError::Torch`]).
+    pub fn reports_non_finite(&self) -> bool {
+        match self {
+            Self::Solver(e) => e.is_non_finite(),
+            Self::Torch(e) => torch_reports_non_finite(e),
+            Self::CustomOp { message, .. } => mfm_solver::SolverError::marks_non_finite(message),
+            Self::Operators(_) | Self::Shape { .. } | Self::Kind { .. } => false,
+        }
+    }
+}
+
+/// Whether a libtorch error carries a [`mfm_solver::SolverError::NonFinite`]
+/// raised inside one of the crate's autograd nodes (see
+/// [`KernelError::reports_non_finite`]).
+pub fn torch_reports_non_finite(e: &tch::TchError) -> bool {
+    mfm_solver::SolverError::marks_non_finite(&e.to_string())
+}
+
 /// A [`KernelError::Shape`] naming `what`, the expected shape in words and
 /// `t`'s actual shape.
 pub fn shape_error(

@@ -568,6 +568,15 @@ impl MeanRemoval {
     }
 }
 
+/// Vertex positions as the `f32` tensor `[1, V, 3]` on `device` that a
+/// network takes them as (a shape's signal, a source's conditioning).
+pub fn positions_tensor(positions: &[[f64; 3]], device: Device) -> Tensor {
+    let flat: Vec<f32> = positions.iter().flat_map(|p| p.map(|x| x as f32)).collect();
+    Tensor::from_slice(&flat)
+        .reshape([1, positions.len() as i64, 3])
+        .to_device(device)
+}
+
 /// Everything PoissonNet needs from one triangle mesh, as tensors and
 /// differentiable operators. See the [module docs](self).
 ///

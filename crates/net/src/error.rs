@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-pub use mfm_kernels::error::KernelError;
+pub use mfm_kernels::error::{KernelError, torch_reports_non_finite};
 
 /// Everything that can go wrong building, running, saving or loading a
 /// PoissonNet.
@@ -52,6 +52,18 @@ impl From<tch::TchError> for NetError {
 
 /// Result alias of this crate.
 pub type Result<T, E = NetError> = std::result::Result<T, E>;
+
+impl NetError {
+    /// Whether this error reports a NaN or infinity reaching one of the
+    /// network's Poisson solves ([`KernelError::reports_non_finite`]): what
+    /// a diverged network's overflowing values cause.
+    pub fn reports_non_finite(&self) -> bool {
+        match self {
+            Self::Kernel(e) => e.reports_non_finite(),
+            _ => false,
+        }
+    }
+}
 
 /// [`mfm_kernels::error::shape_error`] as a [`NetError`]: `what`, the
 /// expected shape in words and `t`'s actual shape.

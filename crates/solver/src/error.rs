@@ -157,6 +157,25 @@ pub enum SolverError {
 /// Shorthand for results of this crate.
 pub type Result<T, E = SolverError> = std::result::Result<T, E>;
 
+/// The words that open the message of [`SolverError::NonFinite`]. A solve
+/// that runs inside a libtorch autograd node reaches its caller as text
+/// only (the error crosses libtorch's C++), where
+/// [`SolverError::marks_non_finite`] recognises it.
+pub const NON_FINITE_MARK: &str = "non-finite value";
+
+impl SolverError {
+    /// Whether this is [`SolverError::NonFinite`].
+    pub fn is_non_finite(&self) -> bool {
+        matches!(self, Self::NonFinite { .. })
+    }
+
+    /// Whether `text` holds the message of a [`SolverError::NonFinite`]
+    /// (the text of an error that crossed libtorch).
+    pub fn marks_non_finite(text: &str) -> bool {
+        text.contains(NON_FINITE_MARK)
+    }
+}
+
 fn pivot_text(column: usize, pivot: f64, diagonal: f64, tolerance: f64) -> String {
     if pivot.is_nan() {
         format!(
@@ -167,5 +186,27 @@ fn pivot_text(column: usize, pivot: f64, diagonal: f64, tolerance: f64) -> Strin
             "the pivot of column {column} is {pivot:e}, expected more than {tolerance:e} times its \
              diagonal entry {diagonal:e}"
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_non_finite_message_carries_its_mark_and_no_other_does() {
+        let e = SolverError::NonFinite {
+            what: "right-hand side",
+            row: 3,
+            col: 1,
+            value: f64::NAN,
+        };
+        assert!(e.is_non_finite());
+        assert!(SolverError::marks_non_finite(&format!(
+            "custom op solve: {e}"
+        )));
+        let other = SolverError::NotSquare { nrows: 2, ncols: 3 };
+        assert!(!other.is_non_finite());
+        assert!(!SolverError::marks_non_finite(&other.to_string()));
     }
 }

@@ -1,4 +1,4 @@
-//! Adam with exactly restorable state: the optimizer of [`crate::train`].
+//! Adam with exactly restorable state: the optimizer of [`crate::TrainingLoop`].
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -6,7 +6,7 @@ use std::path::Path;
 use mfm_net::PoissonNet;
 use tch::{Device, Kind, Tensor};
 
-use crate::error::{FmError, Result};
+use crate::error::{Result, TrainError};
 
 /// Adam (Kingma & Ba) over a network's variables, with state that can be
 /// saved and restored exactly.
@@ -149,12 +149,12 @@ impl Adam {
     /// Restores moments written by [`Adam::save`] and the step count.
     ///
     /// # Errors
-    /// [`FmError::Files`] (`Format`) naming the file when a moment is missing or has
+    /// [`TrainError::Files`] (`Format`) naming the file when a moment is missing or has
     /// another shape; libtorch read errors.
     pub fn load(&mut self, path: &Path, steps: u64) -> Result<()> {
         let file: BTreeMap<String, Tensor> = Tensor::read_safetensors(path)?.into_iter().collect();
         if file.len() != 2 * self.names.len() {
-            return Err(FmError::format(
+            return Err(TrainError::format(
                 path,
                 format!(
                     "optimizer state has {} tensors, expected {} (two per network variable)",
@@ -168,10 +168,10 @@ impl Adam {
                 for (prefix, dst) in [("m", &mut self.m[i]), ("v", &mut self.v[i])] {
                     let key = format!("{prefix}.{name}");
                     let src = file.get(&key).ok_or_else(|| {
-                        FmError::format(path, format!("optimizer state lacks {key}"))
+                        TrainError::format(path, format!("optimizer state lacks {key}"))
                     })?;
                     if src.size() != dst.size() {
-                        return Err(FmError::format(
+                        return Err(TrainError::format(
                             path,
                             format!(
                                 "{key} has shape {:?}, the network variable {:?}",
