@@ -10,7 +10,8 @@ use mfm_arbitrary::folders::{
     EvalFolder, FreshRun, SampleFolder, TrainingRun, evaluate_experiment, write_sample_folder,
 };
 use mfm_arbitrary::markers::{ARBITRARY_SPEC, FolderKind, RunKind};
-use mfm_fm::config::{DeviceChoice, OdeMethod};
+use mfm_fm::config::OdeMethod;
+use mfm_fm::device::DeviceChoice;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 

@@ -4,7 +4,7 @@
 use crate::mesh::load_mesh;
 use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand};
-use mfm_fm::config::DeviceChoice;
+use mfm_fm::device::DeviceChoice;
 use mfm_net::bench::{BenchOptions, bench_training_step};
 use mfm_net::model::PresetReport;
 use mfm_net::{PoissonNet, PoissonNetConfig};

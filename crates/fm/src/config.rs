@@ -1,5 +1,10 @@
 //! [`RunConfig`]: everything a training run needs besides its data, as one
-//! TOML file.
+//! TOML file: the schema, its defaults, its checks and its TOML form. The
+//! pieces it names live with their concepts: the rate schedule
+//! ([`mfm_train::LrSchedule`]), the path times ([`crate::path::TimeSampling`]),
+//! the device ([`crate::device::DeviceChoice`]), the presets
+//! ([`crate::presets`]), what a resumed run may change
+//! ([`crate::train::RESUMABLE_FIELDS`]).
 //!
 //! A run folder holds the configuration it was started with
 //! (`config.toml`, written by [`RunConfig::write_toml_file`]); every
@@ -52,7 +57,7 @@
 //! its implementation details and the authors' configs: canonical frame,
 //! `matern:100` noise with `sigma = 3`, centred noise and targets, 20
 //! midpoint sampling steps) on the paper's network, conditioned on `t`
-//! only; [`RunConfig::preset`] gives the named presets `paper` and
+//! only; [`RunConfig::preset`] ([`crate::presets`]) gives the named presets `paper` and
 //! `paper-elastic` (the official human-pose and elastic models, conditioned
 //! on source xyz and `t`), `cpu` and `cpu-deform` (a small network and a
 //! few thousand steps, minutes on two cores).
@@ -77,12 +82,10 @@ use mfm_noise::NoiseKind;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use mfm_train::LrSchedule;
-pub use mfm_train::resume::ConfigChange;
 
+use crate::device::DeviceChoice;
 use crate::error::{FmError, Result};
-
-/// Names accepted by [`RunConfig::preset`].
-pub const PRESETS: [&str; 4] = ["paper", "paper-elastic", "cpu", "cpu-deform"];
+use crate::path::TimeSampling;
 
 /// A training run: data, network, noise, optimization and sampling settings.
 ///
@@ -199,9 +202,6 @@ pub struct ModelConfig {
     /// clean-signal form).
     pub prediction: crate::checkpoint::Prediction,
 }
-
-/// `train.ema` of the `cpu` preset.
-pub const CPU_EMA: f64 = 0.999;
 
 /// Largest loss weight `1 / (1 - t)^2` of clean-signal prediction
 /// ([`ModelConfig::prediction`]): reached at `t = 0.9`.
@@ -403,53 +403,6 @@ pub mod noise_kind_string {
     }
 }
 
-/// Where training runs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum DeviceChoice {
-    /// The first CUDA device when libtorch sees one, else the CPU.
-    #[default]
-    Auto,
-    /// The CPU.
-    Cpu,
-    /// The first CUDA device (an error without one).
-    Cuda,
-}
-
-impl DeviceChoice {
-    /// The device this choice resolves to in this process.
-    ///
-    /// # Errors
-    /// [`FmError::Config`] for `cuda` when libtorch sees no CUDA device.
-    pub fn resolve(self) -> Result<tch::Device> {
-        let cuda = tch::Cuda::is_available();
-        match self {
-            Self::Auto if cuda => Ok(tch::Device::Cuda(0)),
-            Self::Auto | Self::Cpu => Ok(tch::Device::Cpu),
-            Self::Cuda if cuda => Ok(tch::Device::Cuda(0)),
-            Self::Cuda => Err(FmError::Config(
-                "device \"cuda\" asked for, but libtorch sees no CUDA device".into(),
-            )),
-        }
-    }
-}
-
-impl std::str::FromStr for DeviceChoice {
-    type Err = FmError;
-
-    /// `auto`, `cpu` or `cuda` (as in `train.device`).
-    fn from_str(s: &str) -> Result<Self> {
-        match s.trim().to_ascii_lowercase().as_str() {
-            "auto" => Ok(Self::Auto),
-            "cpu" => Ok(Self::Cpu),
-            "cuda" => Ok(Self::Cuda),
-            other => Err(FmError::Config(format!(
-                "unknown device {other:?}; expected auto, cpu or cuda"
-            ))),
-        }
-    }
-}
-
 /// `[train]`: optimization. Defaults are the paper's recipe.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -517,126 +470,6 @@ pub struct TrainConfig {
     /// (default none), written even when off the `checkpoint_every` grid:
     /// snapshots for curves of sample quality against training time.
     pub keep_at: Vec<u64>,
-}
-
-/// The distribution of the path time `t` in training.
-///
-/// In TOML: `"uniform"`, `"logit-normal"` (mean 0, standard deviation 1),
-/// `"logit-normal:M:S"`, or `"late:P"`. Draws come from the step's own
-/// random stream, so they are a pure function of the seed and the step.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub enum TimeSampling {
-    /// `t ~ U[0, 1)`.
-    #[default]
-    Uniform,
-    /// `t = sigmoid(m + s z)`, `z ~ N(0, 1)`: more weight on the middle of
-    /// the path, where the velocity is hardest to predict.
-    LogitNormal {
-        /// `m`.
-        mean: f64,
-        /// `s > 0`.
-        std: f64,
-    },
-    /// `t = 1 - (1 - u)^p`, `p > 0`: `p > 1` puts more weight near the data
-    /// end (`t -> 1`), where a sample's detail is decided.
-    Late {
-        /// `p`.
-        power: f64,
-    },
-}
-
-impl TimeSampling {
-    /// Draws one path time in `[0, 1]` from `rng`: one uniform `f32` for
-    /// `uniform` (the draw training has always made), one uniform `f64` for
-    /// `late`, one standard normal (`rand_distr`) for `logit-normal`; the
-    /// last two are computed in `f64`.
-    pub fn draw(&self, rng: &mut impl rand::Rng) -> f32 {
-        match *self {
-            Self::Uniform => rng.random::<f32>(),
-            Self::LogitNormal { mean, std } => {
-                let z: f64 = rng.sample(rand_distr::StandardNormal);
-                (1.0 / (1.0 + (-(mean + std * z)).exp())) as f32
-            }
-            Self::Late { power } => (1.0 - (1.0 - rng.random::<f64>()).powf(power)) as f32,
-        }
-    }
-
-    fn validate(&self) -> std::result::Result<(), String> {
-        match *self {
-            Self::Uniform => Ok(()),
-            Self::LogitNormal { mean, std } => {
-                if mean.is_finite() && std.is_finite() && std > 0.0 {
-                    Ok(())
-                } else {
-                    Err(format!(
-                        "logit-normal needs a finite mean and a finite std > 0, found {mean}, {std}"
-                    ))
-                }
-            }
-            Self::Late { power } => {
-                if power.is_finite() && power > 0.0 {
-                    Ok(())
-                } else {
-                    Err(format!("late needs a finite power > 0, found {power}"))
-                }
-            }
-        }
-    }
-}
-
-impl fmt::Display for TimeSampling {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::Uniform => f.write_str("uniform"),
-            Self::LogitNormal { mean, std } => write!(f, "logit-normal:{mean}:{std}"),
-            Self::Late { power } => write!(f, "late:{power}"),
-        }
-    }
-}
-
-impl std::str::FromStr for TimeSampling {
-    type Err = String;
-
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        let parts: Vec<&str> = s.trim().split(':').collect();
-        let num = |x: &str| {
-            x.parse::<f64>()
-                .map_err(|_| format!("time sampling {s:?}: {x:?} is not a number"))
-        };
-        let t = match parts.as_slice() {
-            ["uniform"] => Self::Uniform,
-            ["logit-normal"] => Self::LogitNormal {
-                mean: 0.0,
-                std: 1.0,
-            },
-            ["logit-normal", m, sd] => Self::LogitNormal {
-                mean: num(m)?,
-                std: num(sd)?,
-            },
-            ["late", p] => Self::Late { power: num(p)? },
-            _ => {
-                return Err(format!(
-                    "unknown time sampling {s:?}; expected \"uniform\", \"logit-normal\", \"logit-normal:M:S\" or \"late:P\""
-                ));
-            }
-        };
-        t.validate()
-            .map_err(|e| format!("time sampling {s:?}: {e}"))?;
-        Ok(t)
-    }
-}
-
-impl Serialize for TimeSampling {
-    fn serialize<S: Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
-        s.serialize_str(&self.to_string())
-    }
-}
-
-impl<'de> Deserialize<'de> for TimeSampling {
-    fn deserialize<D: Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
-        let s = String::deserialize(d)?;
-        s.parse().map_err(serde::de::Error::custom)
-    }
 }
 
 /// `[train.augment]`: data augmentation by a random global scale and shift
@@ -753,111 +586,6 @@ impl Default for SampleConfig {
 }
 
 impl RunConfig {
-    /// A named preset. The `paper` ones are the official recipe
-    /// (kts707/Matern-FM's configs) on the paper's network, for a GPU; the
-    /// `cpu` ones the same method sized for two cores. All train in the
-    /// canonical frame with centred noise and targets, no augmentation
-    /// (the official single-source recipe) and sample with 20 midpoint
-    /// steps (step 0.05).
-    /// - `paper`: the human-pose model (official `moyo_fixed_source`):
-    ///   PoissonNet `W = 128, K = 5, nl = 3` conditioned on source xyz and
-    ///   `t`, `matern:100` noise with `sigma = 5`, batch 32, 160k steps, lr
-    ///   `5e-4` times 0.2 from step 40k, gradient clipping at 1.
-    /// - `paper-elastic`: the elastic-deformation model (official
-    ///   `stanford_bunny` and `fish`): as `paper` with `sigma = 3`, batch
-    ///   40, lr `5e-4` times 0.2 at steps 5k and 140k.
-    /// - `cpu`: scalar signals (the GMM experiment) on the pretrained demo
-    ///   model's network, `W = 32, K = 3, nl = 3`, conditioned on `t`,
-    ///   batch 4, 2000 steps, a checkpoint every 100 steps, `sigma = 3`, the
-    ///   official loss, and the two changes that helped most in
-    ///   docs/BENCHMARKS.md ("Training beyond the paper"): a warm-up over
-    ///   the first 5% of the run to lr `4e-3` and a cosine decay to `1e-5`
-    ///   at the run's last step (so `--steps` stretches it), and
-    ///   logit-normal path times; sampling with the weight average
-    ///   (`train.ema = 0.999`). A few minutes of training on two cores at
-    ///   ~2.5k vertices (docs/BENCHMARKS.md, "The `cpu` preset").
-    /// - `cpu-deform`: shapes (positions), `cpu` conditioned on the source
-    ///   xyz and `t`, for 3000 steps: on the shared galloping horse this
-    ///   recipe took samples from 2.9 to 2.0 times the data's floor from
-    ///   the nearest real shape and flipped faces from 7.9% to 2.0%, where
-    ///   the former shape recipe (`W = 16, K = 2, nl = 2`, 1000 steps, lr
-    ///   `2e-3` then `5e-4`, uniform times, no average), 3000 steps of it,
-    ///   the new schedule alone, the larger network alone or `sigma = 1`
-    ///   moved it by 0.3 at most (docs/BENCHMARKS.md, "Own data"); about
-    ///   12 minutes on two cores at 8.4k vertices. Sampling takes 5
-    ///   midpoint steps (`sample.steps = 5`): its flows are nearly straight,
-    ///   and 2, 5, 10 and 20 steps gave the same plausibility, coverage and
-    ///   roughness within 0.05 on the horse and the crane, so 20 would only
-    ///   cost 4x the time, minutes a sample at a million faces.
-    ///
-    /// # Errors
-    /// [`FmError::Config`] naming the known presets.
-    pub fn preset(name: &str) -> Result<Self> {
-        match name {
-            "paper" => {
-                let mut c = Self::default();
-                c.model.condition_on_xyz = true;
-                c.noise.scale = NoiseScale::Factor(5.0);
-                c.train.lr_schedule = LrSchedule::Decay {
-                    factor: 0.2,
-                    at: vec![40_000],
-                };
-                Ok(c)
-            }
-            "paper-elastic" => {
-                let mut c = Self::preset("paper")?;
-                c.noise.scale = NoiseScale::Factor(3.0);
-                c.train.batch = 40;
-                c.train.lr_schedule = LrSchedule::Decay {
-                    factor: 0.2,
-                    at: vec![5_000, 140_000],
-                };
-                Ok(c)
-            }
-            "cpu" => {
-                let base = Self::default();
-                Ok(Self {
-                    model: ModelConfig {
-                        preset: "small".into(),
-                        width: Some(32),
-                        blocks: Some(3),
-                        vector_layers: Some(3),
-                        ..ModelConfig::default()
-                    },
-                    train: TrainConfig {
-                        steps: 2000,
-                        batch: 4,
-                        lr: 4e-3,
-                        lr_schedule: LrSchedule::CosineOverRun {
-                            warmup_fraction: 0.05,
-                            floor: 1e-5,
-                        },
-                        checkpoint_every: 100,
-                        log_every: 10,
-                        ema: CPU_EMA,
-                        time: TimeSampling::LogitNormal {
-                            mean: 0.0,
-                            std: 1.0,
-                        },
-                        ..base.train
-                    },
-                    ..base
-                })
-            }
-            "cpu-deform" => {
-                let mut c = Self::preset("cpu")?;
-                c.model.condition_on_xyz = true;
-                c.train.steps = 3000;
-                c.sample.steps = 5;
-                Ok(c)
-            }
-            other => Err(FmError::Config(format!(
-                "unknown run preset {other:?}; expected one of {}",
-                PRESETS.join(", ")
-            ))),
-        }
-    }
-
     /// Checks values the types cannot: positive sizes and rates, a valid
     /// noise kind and network.
     ///
@@ -1017,19 +745,6 @@ impl RunConfig {
     }
 }
 
-/// Fields of a run's configuration that may change when it is resumed:
-/// how long it runs, how it checkpoints, where it runs and where its data
-/// now lives. Every other field shapes the model or the optimisation.
-pub const RESUMABLE_FIELDS: &[&str] = &[
-    "dataset.path",
-    "train.steps",
-    "train.checkpoint_every",
-    "train.keep_checkpoints",
-    "train.keep_at",
-    "train.threads",
-    "train.device",
-];
-
 /// A TOML parse error on one line: "line L, column C: MESSAGE (`the
 /// line's text`)" instead of the parser's multi-line drawing.
 fn toml_error_line(text: &str, e: &toml::de::Error) -> String {
@@ -1059,90 +774,22 @@ fn toml_error_line(text: &str, e: &toml::de::Error) -> String {
     }
 }
 
-impl RunConfig {
-    /// The fields in which `other` differs from `self`, in TOML order of
-    /// their dotted paths.
-    ///
-    /// # Errors
-    /// As [`RunConfig::to_toml_string`].
-    pub fn changes_to(&self, other: &RunConfig) -> Result<Vec<ConfigChange>> {
-        let value = |c: &RunConfig| -> Result<serde_json::Value> {
-            let v: toml::Value = toml::from_str(&c.to_toml_string()?).map_err(|e| {
-                FmError::Config(format!("internal: a configuration does not read back: {e}"))
-            })?;
-            serde_json::to_value(v).map_err(|e| {
-                FmError::Config(format!(
-                    "internal: a configuration is not a JSON value: {e}"
-                ))
-            })
-        };
-        Ok(mfm_train::resume::changes(&value(self)?, &value(other)?))
-    }
-}
-
-/// Where the dataset of a run is now: `stored` when it is a folder;
-/// otherwise, for a run folder and its dataset moved together (a project
-/// copied to another machine), the first folder holding a dataset manifest
-/// among `A/T` for `A` an ancestor of `run_dir` (up to 3 levels) and `T` the
-/// last 1 to 3 components of `stored`. `None` when nothing is found.
-pub fn locate_dataset(stored: &Path, run_dir: &Path) -> Option<PathBuf> {
-    if stored.is_dir() {
-        return Some(stored.to_path_buf());
-    }
-    let run = std::path::absolute(run_dir).ok()?;
-    let parts: Vec<&std::ffi::OsStr> = stored
-        .components()
-        .filter_map(|c| match c {
-            std::path::Component::Normal(p) => Some(p),
-            _ => None,
-        })
-        .collect();
-    for ancestor in run.ancestors().skip(1).take(3) {
-        for keep in 1..=parts.len().min(3) {
-            let mut candidate = ancestor.to_path_buf();
-            candidate.extend(&parts[parts.len() - keep..]);
-            if candidate.join(crate::dataset::MANIFEST_FILE).is_file() {
-                return Some(candidate);
-            }
-        }
-    }
-    None
-}
-
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 
     #[test]
-    fn schedules_give_the_documented_rates() {
+    fn schedules_read_from_toml_and_give_their_rates() {
         let paper = RunConfig::default().train;
         assert_eq!(paper.lr_at(0), 5e-4);
         assert_eq!(paper.lr_at(39_999), 5e-4);
         assert_eq!(paper.lr_at(40_000), 1e-4);
-        let d = LrSchedule::Decay {
-            factor: 0.2,
-            at: vec![40, 160],
-        };
-        assert_eq!(d.lr(1.0, 39, 0), 1.0);
-        assert_eq!(d.lr(1.0, 40, 0), 0.2);
-        assert!((d.lr(1.0, 200, 0) - 0.04).abs() < 1e-15);
-        assert_eq!(LrSchedule::constant().lr(3.0, 1_000_000, 0), 3.0);
         let c = LrSchedule::Cosine {
             warmup: 10,
             end: 110,
             floor: 0.1,
         };
-        assert!((c.lr(2.0, 0, 0) - 0.2).abs() < 1e-15);
-        assert!((c.lr(2.0, 9, 0) - 2.0).abs() < 1e-15);
-        assert!((c.lr(2.0, 10, 0) - 2.0).abs() < 1e-15);
-        // half way down the cosine: the mean of base and floor
-        assert!((c.lr(2.0, 60, 0) - 1.05).abs() < 1e-12);
-        assert_eq!(c.lr(2.0, 110, 0), 0.1);
-        assert_eq!(c.lr(2.0, 10_000, 0), 0.1);
-        // monotone after the warm-up
-        let rates: Vec<f64> = (10..=110).map(|s| c.lr(2.0, s, 0)).collect();
-        assert!(rates.windows(2).all(|w| w[1] <= w[0]));
         // TOML, both ways, and its refusals
         let t = RunConfig::from_toml_str(
             "[train]\nlr_schedule = { warmup = 10, cosine = 110, floor = 0.1 }\n",
@@ -1177,12 +824,6 @@ mod tests {
             end: 5000,
             floor: 1e-5,
         };
-        for step in [0, 1, 249, 250, 251, 2600, 4999, 5000] {
-            assert_eq!(r.lr(4e-3, step, 5000), fixed.lr(4e-3, step, 0), "{step}");
-        }
-        // a 20-step run warms up over one step and ends near the floor
-        assert_eq!(r.lr(4e-3, 0, 20), 4e-3);
-        assert!(r.lr(4e-3, 19, 20) < 1e-4);
         let t = RunConfig::from_toml_str(
             "[train]\nsteps = 5000\nlr = 4e-3\nlr_schedule = { warmup_fraction = 0.05, floor = 1e-5 }\n",
             "x.toml",
@@ -1195,47 +836,16 @@ mod tests {
     }
 
     #[test]
-    fn device_choices_parse_like_the_config_field() {
+    fn device_choices_read_as_their_command_line_spelling() {
         for (text, choice) in [
             ("auto", DeviceChoice::Auto),
-            (" CPU", DeviceChoice::Cpu),
+            ("cpu", DeviceChoice::Cpu),
             ("cuda", DeviceChoice::Cuda),
         ] {
-            assert_eq!(text.parse::<DeviceChoice>().unwrap(), choice);
-            // the same spelling as `train.device` in a config file
-            let toml = format!("[train]\ndevice = {:?}\n", text.trim().to_lowercase());
-            let c = RunConfig::from_toml_str(&toml, "x").unwrap();
+            let c =
+                RunConfig::from_toml_str(&format!("[train]\ndevice = {text:?}\n"), "x").unwrap();
             assert_eq!(c.train.device, choice);
+            assert_eq!(text.parse::<DeviceChoice>().unwrap(), choice);
         }
-        let e = "gpu".parse::<DeviceChoice>().unwrap_err().to_string();
-        assert!(
-            e.contains("\"gpu\"") && e.contains("auto, cpu or cuda"),
-            "{e}"
-        );
-        assert_eq!(DeviceChoice::Cpu.resolve().unwrap(), tch::Device::Cpu);
-        match DeviceChoice::Cuda.resolve() {
-            Ok(d) => assert_eq!(d, tch::Device::Cuda(0)),
-            Err(e) => assert!(e.to_string().contains("no CUDA device"), "{e}"),
-        }
-    }
-
-    #[test]
-    fn presets_validate_and_roundtrip() {
-        for name in PRESETS {
-            let c = RunConfig::preset(name).unwrap();
-            c.validate().unwrap();
-            let text = c.to_toml_string().unwrap();
-            assert_eq!(RunConfig::from_toml_str(&text, "x").unwrap(), c, "{text}");
-        }
-        assert_eq!(
-            RunConfig::preset("paper")
-                .unwrap()
-                .model
-                .net_config(3)
-                .unwrap()
-                .num_parameters(),
-            1_369_600
-        );
-        assert!(RunConfig::preset("gpu").is_err());
     }
 }

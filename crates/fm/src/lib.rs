@@ -12,9 +12,11 @@
 pub mod checkpoint;
 pub mod config;
 pub mod context;
+pub mod device;
 pub mod error;
 pub mod official;
 pub mod path;
+pub mod presets;
 pub mod run_folder;
 pub mod sample;
 pub mod sample_folder;

@@ -14,7 +14,8 @@ use mfm_data::dataset::Dataset;
 use mfm_noise::NoiseKind;
 
 use crate::checkpoint::{self, CONFIG_FILE};
-use crate::config::{DeviceChoice, RunConfig, locate_dataset};
+use crate::config::RunConfig;
+use crate::device::DeviceChoice;
 use crate::error::{FmError, Result};
 use crate::train::{TrainSummary, Trainer};
 
@@ -223,4 +224,33 @@ pub fn keep_if_progress(fresh: mfm_files::Undo, run_dir: &Path, succeeded: bool)
     if succeeded || mfm_train::checkpoint::list_checkpoints(run_dir).is_ok_and(|c| !c.is_empty()) {
         fresh.keep();
     }
+}
+
+/// Where the dataset of a run is now: `stored` when it is a folder;
+/// otherwise, for a run folder and its dataset moved together (a project
+/// copied to another machine), the first folder holding a dataset manifest
+/// among `A/T` for `A` an ancestor of `run_dir` (up to 3 levels) and `T` the
+/// last 1 to 3 components of `stored`. `None` when nothing is found.
+pub fn locate_dataset(stored: &Path, run_dir: &Path) -> Option<PathBuf> {
+    if stored.is_dir() {
+        return Some(stored.to_path_buf());
+    }
+    let run = std::path::absolute(run_dir).ok()?;
+    let parts: Vec<&std::ffi::OsStr> = stored
+        .components()
+        .filter_map(|c| match c {
+            std::path::Component::Normal(p) => Some(p),
+            _ => None,
+        })
+        .collect();
+    for ancestor in run.ancestors().skip(1).take(3) {
+        for keep in 1..=parts.len().min(3) {
+            let mut candidate = ancestor.to_path_buf();
+            candidate.extend(&parts[parts.len() - keep..]);
+            if candidate.join(crate::dataset::MANIFEST_FILE).is_file() {
+                return Some(candidate);
+            }
+        }
+    }
+    None
 }

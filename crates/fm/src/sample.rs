@@ -48,8 +48,9 @@ use tch::{Device, Kind, Tensor};
 use mfm_train::checkpoint::{self, EMA_FILE, WEIGHTS_FILE};
 
 use crate::checkpoint::{FLOW_FILE, FlowSpec};
-use crate::config::{DeviceChoice, OdeMethod, SampleConfig};
+use crate::config::{OdeMethod, SampleConfig};
 use crate::context::MeshContext;
+use crate::device::DeviceChoice;
 use crate::error::{FmError, Result};
 use crate::signals::InMemorySignals;
 

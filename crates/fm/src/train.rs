@@ -76,7 +76,7 @@ use mfm_net::mesh::positions_tensor;
 use mfm_net::{MeshTensors, PoissonNet, loss};
 use mfm_noise::NoiseSampler;
 use mfm_train::checkpoint::{self, WEIGHTS_FILE};
-use mfm_train::resume::{self, ResumePolicy};
+use mfm_train::resume::{self, ConfigChange, ResumePolicy};
 use mfm_train::seeding::derived_rng;
 use mfm_train::{LoopConfig, Objective, RunNames, TrainingLoop};
 use rand::Rng;
@@ -85,8 +85,9 @@ use tch::{Device, Tensor};
 pub use mfm_train::TrainSummary;
 
 use crate::checkpoint::{CONFIG_FILE, FLOW_FILE, FlowSpec, Prediction};
-use crate::config::{CLEAN_WEIGHT_MAX, DeviceChoice, FrameChoice, NoiseScale, RunConfig};
+use crate::config::{CLEAN_WEIGHT_MAX, FrameChoice, NoiseScale, RunConfig};
 use crate::context::MeshContext;
+use crate::device::DeviceChoice;
 use crate::error::{FmError, Result};
 use crate::path::rectified_path;
 use crate::sample::{conditioning, offset_tensor};
@@ -396,23 +397,55 @@ fn in_frame(
     }
 }
 
+/// Fields of a run's configuration that may change when it is resumed:
+/// how long it runs, how it checkpoints, where it runs and where its data
+/// now lives. Every other field shapes the model or the optimisation.
+pub const RESUMABLE_FIELDS: &[&str] = &[
+    "dataset.path",
+    "train.steps",
+    "train.checkpoint_every",
+    "train.keep_checkpoints",
+    "train.keep_at",
+    "train.threads",
+    "train.device",
+];
+
+/// The fields in which `after` differs from `before`, in TOML order of
+/// their dotted paths.
+///
+/// # Errors
+/// As [`RunConfig::to_toml_string`].
+fn config_changes(before: &RunConfig, after: &RunConfig) -> Result<Vec<ConfigChange>> {
+    let value = |c: &RunConfig| -> Result<serde_json::Value> {
+        let v: toml::Value = toml::from_str(&c.to_toml_string()?).map_err(|e| {
+            FmError::Config(format!("internal: a configuration does not read back: {e}"))
+        })?;
+        serde_json::to_value(v).map_err(|e| {
+            FmError::Config(format!(
+                "internal: a configuration is not a JSON value: {e}"
+            ))
+        })
+    };
+    Ok(resume::changes(&value(before)?, &value(after)?))
+}
+
 /// The configuration a resumed run goes on with: the checkpoint's, with the
 /// edits made since to the run folder's `config.toml` when they are all in
-/// [`RESUMABLE_FIELDS`](crate::config::RESUMABLE_FIELDS).
+/// [`RESUMABLE_FIELDS`].
 fn with_resumable_edits(run_dir: &Path, saved: RunConfig, step: u64) -> Result<RunConfig> {
     let path = run_dir.join(CONFIG_FILE);
     if !path.exists() {
         return Ok(saved);
     }
     let edited = RunConfig::from_toml_file(&path)?;
-    let changes = saved.changes_to(&edited)?;
+    let changes = config_changes(&saved, &edited)?;
     resume::refuse_edits(
         &path,
         step,
         &changes,
         Some(edited.train.steps),
         ResumePolicy {
-            resumable: crate::config::RESUMABLE_FIELDS,
+            resumable: RESUMABLE_FIELDS,
             steps_field: "train.steps",
             otherwise: "start a new run with --config",
         },

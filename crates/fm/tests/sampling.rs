@@ -7,7 +7,8 @@ use std::sync::atomic::AtomicBool;
 
 use mfm_fm::InMemorySignals;
 use mfm_fm::checkpoint::{self, FlowSpec};
-use mfm_fm::config::{DeviceChoice, OdeMethod, RunConfig};
+use mfm_fm::config::{OdeMethod, RunConfig};
+use mfm_fm::device::DeviceChoice;
 use mfm_fm::sample::{SampleOptions, Sampler};
 use mfm_fm::train::Trainer;
 use mfm_geometry::{TriMesh, procedural};

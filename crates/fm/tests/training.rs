@@ -9,7 +9,8 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use mfm_fm::checkpoint;
-use mfm_fm::config::{DeviceChoice, NoiseScale, RunConfig};
+use mfm_fm::config::{NoiseScale, RunConfig};
+use mfm_fm::device::DeviceChoice;
 use mfm_fm::train::Trainer;
 use mfm_fm::{FmError, InMemorySignals, SignalSource};
 use mfm_geometry::{TriMesh, procedural};

@@ -11,7 +11,9 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use mfm_fm::InMemorySignals;
-use mfm_fm::config::{DeviceChoice, RunConfig, TimeSampling};
+use mfm_fm::config::RunConfig;
+use mfm_fm::device::DeviceChoice;
+use mfm_fm::path::TimeSampling;
 use mfm_fm::sample::Sampler;
 use mfm_fm::train::Trainer;
 use mfm_geometry::{TriMesh, procedural};
@@ -286,8 +288,8 @@ fn the_new_fields_parse_default_and_refuse_bad_values() {
         assert!(e.contains(field) && e.contains("bad.toml"), "{bad:?}: {e}");
     }
     // keep_at may change on resume; ema may not
-    assert!(mfm_fm::config::RESUMABLE_FIELDS.contains(&"train.keep_at"));
-    assert!(!mfm_fm::config::RESUMABLE_FIELDS.contains(&"train.ema"));
+    assert!(mfm_fm::train::RESUMABLE_FIELDS.contains(&"train.keep_at"));
+    assert!(!mfm_fm::train::RESUMABLE_FIELDS.contains(&"train.ema"));
 }
 
 proptest! {

@@ -292,3 +292,51 @@ impl From<LrSchedule> for LrScheduleRepr {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn schedules_give_the_documented_rates() {
+        let d = LrSchedule::Decay {
+            factor: 0.2,
+            at: vec![40, 160],
+        };
+        assert_eq!(d.lr(1.0, 39, 0), 1.0);
+        assert_eq!(d.lr(1.0, 40, 0), 0.2);
+        assert!((d.lr(1.0, 200, 0) - 0.04).abs() < 1e-15);
+        assert_eq!(LrSchedule::constant().lr(3.0, 1_000_000, 0), 3.0);
+        let c = LrSchedule::Cosine {
+            warmup: 10,
+            end: 110,
+            floor: 0.1,
+        };
+        assert!((c.lr(2.0, 0, 0) - 0.2).abs() < 1e-15);
+        assert!((c.lr(2.0, 9, 0) - 2.0).abs() < 1e-15);
+        assert!((c.lr(2.0, 10, 0) - 2.0).abs() < 1e-15);
+        // half way down the cosine: the mean of base and floor
+        assert!((c.lr(2.0, 60, 0) - 1.05).abs() < 1e-12);
+        assert_eq!(c.lr(2.0, 110, 0), 0.1);
+        assert_eq!(c.lr(2.0, 10_000, 0), 0.1);
+        // monotone after the warm-up
+        let rates: Vec<f64> = (10..=110).map(|s| c.lr(2.0, s, 0)).collect();
+        assert!(rates.windows(2).all(|w| w[1] <= w[0]));
+        // over the run: the fixed cosine with the run's length
+        let r = LrSchedule::CosineOverRun {
+            warmup_fraction: 0.05,
+            floor: 1e-5,
+        };
+        let fixed = LrSchedule::Cosine {
+            warmup: 250,
+            end: 5000,
+            floor: 1e-5,
+        };
+        for step in [0, 1, 249, 250, 251, 2600, 4999, 5000] {
+            assert_eq!(r.lr(4e-3, step, 5000), fixed.lr(4e-3, step, 0), "{step}");
+        }
+        // a 20-step run warms up over one step and ends near the floor
+        assert_eq!(r.lr(4e-3, 0, 20), 4e-3);
+        assert!(r.lr(4e-3, 19, 20) < 1e-4);
+    }
+}
