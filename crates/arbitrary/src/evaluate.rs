@@ -43,8 +43,8 @@ use mfm_eval::quality::{ParamSpread, Quartiles};
 use mfm_geometry::TriMesh;
 use serde::{Deserialize, Serialize};
 
+use crate::error::{ArbitraryError, Result};
 use crate::flow::ArbitrarySampler;
-use mfm_fm::{FmError, Result};
 
 /// The measures of one held-out set; see the [module docs](self).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -163,7 +163,7 @@ fn flat(p: &[[f64; 3]]) -> Vec<f32> {
 /// the examples.
 ///
 /// # Errors
-/// [`FmError::Config`] for a set that is not a pairs dataset; data, shape,
+/// [`ArbitraryError::Dataset`] for a set that is not a pairs dataset; data, shape,
 /// sampling errors.
 pub fn evaluate_set(
     sampler: &ArbitrarySampler,
@@ -174,7 +174,7 @@ pub fn evaluate_set(
 ) -> Result<(SetEvaluation, Vec<Example>)> {
     let data = Dataset::open(set)?;
     let Some(manifest) = PairsManifest::of(&data)? else {
-        return Err(FmError::Config(format!(
+        return Err(ArbitraryError::Dataset(format!(
             "{} is not a pairs dataset made by `mfm dataset pairs`: this evaluation measures \
              targets against the pose space that made them (imported pairs have none; judge \
              their samples with `mfm eval --reference`)",
@@ -234,7 +234,7 @@ pub fn evaluate_set(
         }
         let source = rest
             .with_positions(poses[0].clone())
-            .map_err(|e| FmError::Config(e.to_string()))?;
+            .map_err(|e| ArbitraryError::Source(e.to_string()))?;
         let t0 = Instant::now();
         let out = sampler.sample(&source, s * per_source, per_source, seed)?;
         seconds += t0.elapsed().as_secs_f64();

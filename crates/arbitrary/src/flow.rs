@@ -33,15 +33,16 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 use tch::{Device, Kind, Tensor};
 
+use crate::error::{ArbitraryError, Result};
 use crate::markers::{ARBITRARY_SPEC, FolderKind};
 use crate::predictor::{EigenPredictor, PredictorSpec, prepared};
 use crate::run::{start_or_resume, train_to_end};
 use crate::sources::SourceSet;
 use crate::{Schedule, SourceFrame, finished_weights, read_json, same_config};
+use mfm_fm::FmError;
 use mfm_fm::config::OdeMethod;
 use mfm_fm::context::MeshContext;
 use mfm_fm::path::{ode_step, rectified_path};
-use mfm_fm::{FmError, Result};
 use mfm_net::mesh::positions_tensor;
 use mfm_train::TrainSummary;
 use mfm_train::checkpoint::{NET_CONFIG_FILE, WEIGHTS_FILE};
@@ -139,12 +140,12 @@ impl FlowConfig {
     /// A preset by name ([`PRESETS`]).
     ///
     /// # Errors
-    /// [`FmError::Config`] for another name.
+    /// [`ArbitraryError::Config`] for another name.
     pub fn preset(name: &str) -> Result<Self> {
         match name {
             "paper" => Ok(Self::paper()),
             "cpu" => Ok(Self::cpu()),
-            other => Err(FmError::Config(format!(
+            other => Err(ArbitraryError::Config(format!(
                 "unknown arbitrary-source preset {other:?}; expected one of {}",
                 PRESETS.join(", ")
             ))),
@@ -206,8 +207,9 @@ fn conditioning(source: &Tensor, t: f64, eigen: &Tensor) -> Tensor {
 /// with the finished predictor run `predictor`.
 ///
 /// # Errors
-/// [`FmError::Config`] for a dataset that is not a pairs dataset, an
-/// unfinished predictor, a predictor of another template, or a
+/// [`ArbitraryError::Dataset`] for a dataset that is not a pairs dataset,
+/// [`ArbitraryError::RunFolder`] for an unfinished predictor,
+/// [`ArbitraryError::Mismatch`] for a predictor of another template or a
 /// configuration that differs from the stored one; data, noise, network
 /// and I/O errors.
 pub fn train(
@@ -220,7 +222,7 @@ pub fn train(
 ) -> Result<TrainSummary> {
     let data = Dataset::open(dataset)?;
     let Some(pairs) = training_pairs(&data)? else {
-        return Err(FmError::Config(format!(
+        return Err(ArbitraryError::Dataset(format!(
             "{} is not a pairs dataset (made by `mfm dataset pairs`, or imported from the \
              authors' arbitrary-source file by `mfm dataset import`); the arbitrary-source \
              model trains on (source, target) pairs",
@@ -230,7 +232,7 @@ pub fn train(
     let template = data.mesh().clone();
     let identity = mfm_data::dataset::mesh_identity(&template);
     crate::markers::refuse_imported(run_dir)?;
-    std::fs::create_dir_all(run_dir).map_err(|e| FmError::io(run_dir, e))?;
+    std::fs::create_dir_all(run_dir).map_err(|e| ArbitraryError::io(run_dir, e))?;
     let spec_path = run_dir.join(ARBITRARY_SPEC);
     if spec_path.is_file() {
         let spec: ArbitrarySpec = read_json(&spec_path, "an arbitrary-source run's description")?;
@@ -240,7 +242,7 @@ pub fn train(
         if let Some(theirs) = &source.spec().template
             && *theirs != identity
         {
-            return Err(FmError::Config(format!(
+            return Err(ArbitraryError::Mismatch(format!(
                 "the predictor in {} was trained on another template (the mesh of {}, {theirs}) \
                  than the dataset {} (its mesh: {identity}): train a predictor on this dataset",
                 predictor_dir.display(),
@@ -249,7 +251,7 @@ pub fn train(
             )));
         }
         if source.spec().config.frame != config.frame {
-            return Err(FmError::Config(format!(
+            return Err(ArbitraryError::Mismatch(format!(
                 "the predictor in {} puts sources in the {:?} frame, the flow's configuration in \
                  the {:?} frame: they must agree",
                 predictor_dir.display(),
@@ -258,7 +260,7 @@ pub fn train(
             )));
         }
         if source.spec().vertices != template.num_vertices() {
-            return Err(FmError::Config(format!(
+            return Err(ArbitraryError::Mismatch(format!(
                 "the predictor in {} was trained on a template of {} vertices, the dataset's has {}",
                 predictor_dir.display(),
                 source.spec().vertices,
@@ -270,7 +272,7 @@ pub fn train(
             (NET_CONFIG_FILE, PREDICTOR_NET_CONFIG),
         ] {
             let (a, b) = (predictor_dir.join(from), run_dir.join(to));
-            let bytes = std::fs::read(&a).map_err(|e| FmError::io(&a, e))?;
+            let bytes = std::fs::read(&a).map_err(|e| ArbitraryError::io(&a, e))?;
             mfm_train::checkpoint::write_atomic(&b, &bytes)?;
         }
         mfm_files::write_json(run_dir.join(PREDICTOR_COPY_SPEC), source.spec())?;
@@ -295,7 +297,7 @@ pub fn train(
     let k = predictor.eigenvectors();
     let meshes = data.load_all()?;
     if pairs.is_empty() {
-        return Err(FmError::Config(format!(
+        return Err(ArbitraryError::Dataset(format!(
             "{} has no pairs (one pose per shape?)",
             dataset.display()
         )));
@@ -392,7 +394,7 @@ impl ArbitrarySampler {
     pub fn load(run_dir: &Path) -> Result<Self> {
         let kind = FolderKind::of(run_dir);
         if kind != FolderKind::ArbitraryRun {
-            return Err(FmError::RunFolder(format!(
+            return Err(ArbitraryError::RunFolder(format!(
                 "{}: {}, not an arbitrary-source run (mfm train --mode arbitrary)",
                 run_dir.display(),
                 kind.is()
@@ -405,7 +407,7 @@ impl ArbitrarySampler {
         let weights = finished_weights(run_dir, "model")?;
         let predictor = load_copied_predictor(run_dir)?;
         if predictor.spec().config.frame != spec.config.frame {
-            return Err(FmError::format(
+            return Err(ArbitraryError::format(
                 run_dir.join(ARBITRARY_SPEC),
                 format!(
                     "the flow's source frame ({:?}) is not its predictor's ({:?}, in {PREDICTOR_COPY_SPEC})",
@@ -469,7 +471,7 @@ impl ArbitrarySampler {
     ///
     /// # Errors
     /// A degenerate source, noise and network errors;
-    /// [`FmError::Diverged`] for a non-finite result.
+    /// [`mfm_fm::FmError::Diverged`] for a non-finite result.
     pub fn sample(
         &self,
         source: &TriMesh,
@@ -481,7 +483,7 @@ impl ArbitrarySampler {
         let frame = self.spec.config.frame.apply(&mut positions, None)?;
         let moved = source
             .with_positions(positions.clone())
-            .map_err(|e| FmError::Config(e.to_string()))?;
+            .map_err(|e| ArbitraryError::Source(e.to_string()))?;
         let ctx = MeshContext::new(&moved, self.spec.config.noise)?;
         let x_src = positions_tensor(&positions, Device::Cpu);
         let eigen = if self.spec.config.eigenvectors {
@@ -519,7 +521,8 @@ impl ArbitrarySampler {
                 if flat.iter().any(|y| !y.is_finite()) {
                     return Err(FmError::Diverged(format!(
                         "sample {i} on the source is not finite after {steps} ODE steps"
-                    )));
+                    ))
+                    .into());
                 }
                 Ok(flat
                     .chunks_exact(3)

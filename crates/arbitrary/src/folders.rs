@@ -9,11 +9,12 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
+use crate::error::{ArbitraryError, Result};
 use mfm_data::layout::{HOLDOUT, REFERENCE};
 use mfm_data::pictures::SHOWN;
+use mfm_fm::FmError;
 use mfm_fm::run_folder::keep_if_progress;
 use mfm_fm::sample::sample_ply_name;
-use mfm_fm::{FmError, Result};
 use mfm_geometry::TriMesh;
 use mfm_render::{ColorRange, Panel, save_grid};
 use mfm_train::checkpoint::WEIGHTS_FILE;
@@ -63,9 +64,10 @@ pub struct TrainingRun {
 }
 
 fn stored<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
-    serde_json::from_str(&text)
-        .map_err(|e| FmError::format(path, format!("not readable as a run specification: {e}")))
+    let text = std::fs::read_to_string(path).map_err(|e| ArbitraryError::io(path, e))?;
+    serde_json::from_str(&text).map_err(|e| {
+        ArbitraryError::format(path, format!("not readable as a run specification: {e}"))
+    })
 }
 
 /// A run's configuration from `path`: JSON for a `.json` file, TOML
@@ -74,21 +76,23 @@ fn config_file<T>(path: &Path) -> Result<T>
 where
     T: serde::de::DeserializeOwned + HasSchedule,
 {
-    let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
+    let text = std::fs::read_to_string(path).map_err(|e| ArbitraryError::io(path, e))?;
     let json = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("json"));
     let config: T = if json {
-        serde_json::from_str(&text)
-            .map_err(|e| FmError::format(path, format!("not readable as a configuration: {e}")))?
+        serde_json::from_str(&text).map_err(|e| {
+            ArbitraryError::format(path, format!("not readable as a configuration: {e}"))
+        })?
     } else {
-        toml::from_str(&text)
-            .map_err(|e| FmError::format(path, format!("not readable as a configuration: {e}")))?
+        toml::from_str(&text).map_err(|e| {
+            ArbitraryError::format(path, format!("not readable as a configuration: {e}"))
+        })?
     };
     config
         .schedule()
         .validate()
-        .map_err(|e| FmError::format(path, e.to_string()))?;
+        .map_err(|e| ArbitraryError::format(path, e.to_string()))?;
     Ok(config)
 }
 
@@ -110,7 +114,7 @@ impl HasSchedule for FlowConfig {
 }
 
 fn absolute(p: &Path) -> Result<PathBuf> {
-    std::path::absolute(p).map_err(|e| FmError::io(p, e))
+    std::path::absolute(p).map_err(|e| ArbitraryError::io(p, e))
 }
 
 impl TrainingRun {
@@ -119,7 +123,8 @@ impl TrainingRun {
     ///
     /// # Errors
     /// [`mfm_files::FileError::NotEmpty`] for a fresh run in a folder
-    /// with anything in it; [`FmError::Config`] for an unknown preset, a
+    /// with anything in it; [`ArbitraryError::Config`] for an unknown
+    /// preset, [`ArbitraryError::RunFolder`] for a
     /// flow without a predictor, or resuming a run imported from the
     /// authors' checkpoint ([`crate::official`]); an unreadable stored
     /// specification.
@@ -164,7 +169,7 @@ impl TrainingRun {
                 c.schedule.steps = f.steps.unwrap_or(c.schedule.steps);
                 c.schedule.seed = f.seed.unwrap_or(c.schedule.seed);
                 let predictor = f.predictor.as_deref().ok_or_else(|| {
-                    FmError::Config(
+                    ArbitraryError::RunFolder(
                         "the arbitrary-source flow needs a finished predictor run".into(),
                     )
                 })?;
@@ -344,7 +349,7 @@ pub struct EvalFolder<'a> {
 /// source, its generated targets and a true other pose).
 ///
 /// # Errors
-/// [`FmError::Config`] for an experiment with neither set; the output
+/// [`ArbitraryError::Dataset`] for an experiment with neither set; the output
 /// guard's; [`evaluate_set`]'s; the writers'.
 pub fn evaluate_experiment(
     sampler: &ArbitrarySampler,
@@ -358,17 +363,17 @@ pub fn evaluate_experiment(
     if sets.is_empty() {
         let e = f.experiment.display();
         return Err(match FolderKind::of(f.experiment) {
-            FolderKind::Missing => FmError::RunFolder(format!(
+            FolderKind::Missing => ArbitraryError::RunFolder(format!(
                 "{e}: no such folder (expected the experiment folder of mfm dataset pairs)"
             )),
-            FolderKind::Experiment => FmError::Config(format!(
+            FolderKind::Experiment => ArbitraryError::Dataset(format!(
                 "{e} has no {HOLDOUT} or {REFERENCE} set (write one with mfm dataset pairs --reference N)"
             )),
-            FolderKind::Dataset => FmError::RunFolder(format!(
+            FolderKind::Dataset => ArbitraryError::RunFolder(format!(
                 "{e}: is a dataset folder (one set of an experiment), not an experiment folder: \
                  give the folder of mfm dataset pairs that holds {HOLDOUT}/ and {REFERENCE}/"
             )),
-            other => FmError::RunFolder(format!(
+            other => ArbitraryError::RunFolder(format!(
                 "{e}: {}, not an experiment folder (the --out folder of mfm dataset pairs)",
                 other.is()
             )),
@@ -382,7 +387,7 @@ pub fn evaluate_experiment(
         let theirs =
             mfm_data::dataset::mesh_identity(mfm_data::dataset::Dataset::open(&set)?.mesh());
         if theirs != *trained {
-            return Err(FmError::Config(format!(
+            return Err(ArbitraryError::Mismatch(format!(
                 "{} is an experiment of another template ({theirs}) than the run {} was trained \
                  on (the mesh of {}, {trained}): evaluate it on its own experiment",
                 f.experiment.display(),

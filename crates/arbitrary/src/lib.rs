@@ -34,6 +34,7 @@
 //! pure function of `(seed, s)`, so a resumed run repeats an uninterrupted
 //! one.
 
+pub mod error;
 pub mod evaluate;
 pub mod flow;
 pub mod folders;
@@ -47,10 +48,10 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use mfm_fm::{FmError, Result};
 use mfm_train::LrSchedule;
 use mfm_train::checkpoint::WEIGHTS_FILE;
 
+pub use error::{ArbitraryError, Result};
 pub use run::RESUMABLE_SPEC_FIELDS;
 
 /// The optimization settings shared by both trainings: the settings of
@@ -222,9 +223,9 @@ impl Schedule {
     /// Checks the values.
     ///
     /// # Errors
-    /// [`FmError::Config`] naming the field.
+    /// [`ArbitraryError::Config`] naming the field.
     pub fn validate(&self) -> Result<()> {
-        let bad = |what: &str, v: String| Err(FmError::Config(format!("{what}, found {v}")));
+        let bad = |what: &str, v: String| Err(ArbitraryError::Config(format!("{what}, found {v}")));
         if !(self.lr.is_finite() && self.lr > 0.0) {
             return bad("lr must be finite and > 0", self.lr.to_string());
         }
@@ -254,7 +255,7 @@ impl Schedule {
                 );
             }
             s.validate()
-                .map_err(|e| FmError::Config(format!("lr_schedule: {e}")))?;
+                .map_err(|e| ArbitraryError::Config(format!("lr_schedule: {e}")))?;
         }
         let betas = [self.adam_beta1, self.adam_beta2];
         if !betas
@@ -312,7 +313,7 @@ impl SourceFrame {
     /// change for [`SourceFrame::AsIs`] (`None`).
     ///
     /// # Errors
-    /// [`FmError::Config`] for a degenerate bounding box
+    /// [`ArbitraryError::Source`] for a degenerate bounding box
     /// ([`SourceFrame::Own`] only).
     pub fn apply(
         self,
@@ -331,13 +332,13 @@ impl SourceFrame {
 /// frame.
 ///
 /// # Errors
-/// [`FmError::Config`] for a degenerate bounding box.
+/// [`ArbitraryError::Source`] for a degenerate bounding box.
 pub fn to_own_frame(
     positions: &mut [[f64; 3]],
     also: Option<&mut [[f64; 3]]>,
 ) -> Result<mfm_geometry::frame::CanonicalFrame> {
     let frame = mfm_geometry::frame::CanonicalFrame::of_points(positions).map_err(|e| {
-        FmError::Config(format!("a source mesh has a degenerate bounding box: {e}"))
+        ArbitraryError::Source(format!("a source mesh has a degenerate bounding box: {e}"))
     })?;
     for p in positions.iter_mut() {
         *p = frame.to_canonical(*p);
@@ -352,8 +353,8 @@ pub fn to_own_frame(
 
 /// Reads a run folder's JSON description; `what` names it in the error.
 pub(crate) fn read_json<T: serde::de::DeserializeOwned>(path: &Path, what: &str) -> Result<T> {
-    let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
-    serde_json::from_str(&text).map_err(|e| FmError::format(path, format!("{what}: {e}")))
+    let text = std::fs::read_to_string(path).map_err(|e| ArbitraryError::io(path, e))?;
+    serde_json::from_str(&text).map_err(|e| ArbitraryError::format(path, format!("{what}: {e}")))
 }
 
 /// The error for resuming `run_dir` with a configuration other than its
@@ -362,7 +363,7 @@ pub(crate) fn same_config<T: PartialEq>(run_dir: &Path, stored: &T, given: &T) -
     if stored == given {
         return Ok(());
     }
-    Err(FmError::Config(format!(
+    Err(ArbitraryError::Mismatch(format!(
         "{} was started with another configuration; resume it with the stored one \
          or train into a new folder",
         run_dir.display()
@@ -374,7 +375,7 @@ pub(crate) fn same_config<T: PartialEq>(run_dir: &Path, stored: &T, given: &T) -
 pub(crate) fn finished_weights(run_dir: &Path, what: &str) -> Result<PathBuf> {
     let weights = run_dir.join(WEIGHTS_FILE);
     if !weights.is_file() {
-        return Err(FmError::Config(format!(
+        return Err(ArbitraryError::RunFolder(format!(
             "{} has no finished {what} ({WEIGHTS_FILE}); train it to the end first",
             run_dir.display()
         )));

@@ -6,10 +6,10 @@
 
 use std::path::Path;
 
+use crate::error::{ArbitraryError, Result};
 use mfm_data::dataset::MANIFEST_FILE;
 use mfm_data::layout::{HOLDOUT, PAIR_SPACE, REFERENCE, SPACE, TRAIN};
 use mfm_fm::checkpoint::{CONFIG_FILE, FLOW_FILE};
-use mfm_fm::{FmError, Result};
 
 /// The predictor run's description.
 pub const PREDICTOR_SPEC: &str = mfm_files::owned::RUN_SPECS[0];
@@ -131,11 +131,11 @@ impl FolderKind {
 /// or checkpoints) to continue from.
 ///
 /// # Errors
-/// [`FmError::Config`] saying what to do instead.
+/// [`ArbitraryError::RunFolder`] saying what to do instead.
 pub fn refuse_imported(run_dir: &Path) -> Result<()> {
     let record = run_dir.join(mfm_fm::official::IMPORT_FILE);
     if record.is_file() {
-        return Err(FmError::Config(format!(
+        return Err(ArbitraryError::RunFolder(format!(
             "{} holds a model imported from the authors' checkpoint ({}): it has no training \
              state to resume (no dataset, optimizer or checkpoints); sample it with \
              mfm sample --run {} --source MESH, or train a new run into another folder",

@@ -47,12 +47,12 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
+use crate::error::{ArbitraryError, Result};
 use mfm_fm::config::OdeMethod;
 use mfm_fm::official::{
     OfficialCheckpoint, OfficialExtraConfigs, OfficialOde, OfficialX0, check_extra_configs,
-    check_finite, config_error, ode_steps, x0_noise,
+    check_finite, ode_steps, x0_noise,
 };
-use mfm_fm::{FmError, Result};
 use mfm_geometry::TriMesh;
 use mfm_geometry::frame::SurfaceSize;
 use mfm_net::PoissonNet;
@@ -179,12 +179,12 @@ impl OfficialArbitraryConfig {
     /// Reads an official arbitrary-source YAML configuration.
     ///
     /// # Errors
-    /// [`FmError::Files`] naming the file and the option: unreadable, not
+    /// [`mfm_fm::FmError::Files`] naming the file and the option: unreadable, not
     /// YAML, another model type, an unknown key in `model:`,
     /// `model.eigenvecs_predictor:` or `ode_solver:`, or an option mfm does
     /// not implement (see the [module docs](self)).
     pub fn read(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
+        let text = std::fs::read_to_string(path).map_err(|e| ArbitraryError::io(path, e))?;
         Self::parse(path, &text)
     }
 
@@ -517,7 +517,7 @@ fn cross_check(
     predictor_path: &Path,
 ) -> Result<()> {
     let fail = |detail: String| {
-        FmError::format(
+        ArbitraryError::format(
             predictor_path,
             format!(
                 "the predictor checkpoint is not the predictor inside {}: {detail}",
@@ -571,12 +571,12 @@ fn cross_check(
 /// sampling warns on sources unlike it; without it no template is recorded.
 ///
 /// # Errors
-/// [`FmError::Files`] naming the checkpoint or the configuration for what
+/// [`mfm_fm::FmError::Files`] naming the checkpoint or the configuration for what
 /// they hold that mfm refuses (objects in the checkpoint, options mfm does
 /// not implement, non-float weights, tensors outside the flow's and the
-/// predictor's, a predictor checkpoint that differs); [`FmError::Net`]
+/// predictor's, a predictor checkpoint that differs); [`mfm_fm::FmError::Net`]
 /// ([`mfm_net::NetError::WeightsMismatch`]) naming a missing, extra or
-/// mis-shaped parameter; [`FmError::Diverged`] for non-finite weights; the
+/// mis-shaped parameter; [`mfm_fm::FmError::Diverged`] for non-finite weights; the
 /// output folder's errors.
 pub fn import_official_arbitrary(
     checkpoint_path: &Path,
@@ -595,7 +595,7 @@ pub fn import_official_arbitrary(
         .collect();
     if !outside.is_empty() {
         let shown: Vec<&str> = outside.iter().take(8).copied().collect();
-        return Err(FmError::format(
+        return Err(ArbitraryError::format(
             checkpoint_path,
             format!(
                 "{} tensor(s) belong to neither the flow ({OFFICIAL_PREFIX}*) nor the eigenvector \
@@ -613,7 +613,7 @@ pub fn import_official_arbitrary(
     let flow_tensors = ckpt.tensors(OFFICIAL_PREFIX)?;
     let predictor_tensors = ckpt.tensors(PREDICTOR_PREFIX)?;
     if predictor_tensors.is_empty() {
-        return Err(FmError::format(
+        return Err(ArbitraryError::format(
             checkpoint_path,
             format!(
                 "no {PREDICTOR_PREFIX}* tensors: not a checkpoint of the official \
@@ -646,7 +646,7 @@ pub fn import_official_arbitrary(
             let theirs = OfficialCheckpoint::open(path)?;
             let tensors = theirs.tensors(OFFICIAL_PREFIX)?;
             if tensors.is_empty() {
-                return Err(FmError::format(
+                return Err(ArbitraryError::format(
                     path,
                     format!(
                         "no {OFFICIAL_PREFIX}* tensors: not a checkpoint of the official \
@@ -713,10 +713,10 @@ pub fn import_official_arbitrary(
 /// ([`ARBITRARY_MODEL_TYPE`]).
 ///
 /// # Errors
-/// [`FmError::Files`] naming the file: unreadable, not YAML, no
+/// [`mfm_fm::FmError::Files`] naming the file: unreadable, not YAML, no
 /// `model.type`.
 pub fn official_model_type(path: &Path) -> Result<String> {
-    let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
+    let text = std::fs::read_to_string(path).map_err(|e| ArbitraryError::io(path, e))?;
     let doc: serde_norway::Value =
         serde_norway::from_str(&text).map_err(|e| config_error(path, format!("not YAML: {e}")))?;
     doc.get("model")
@@ -724,4 +724,10 @@ pub fn official_model_type(path: &Path) -> Result<String> {
         .and_then(|t| t.as_str())
         .map(str::to_owned)
         .ok_or_else(|| config_error(path, "no `model.type`"))
+}
+
+/// The error of an official configuration file `path` that mfm cannot
+/// take ([`mfm_fm::official::config_error`]).
+fn config_error(path: &Path, message: impl std::fmt::Display) -> ArbitraryError {
+    mfm_fm::official::config_error(path, message).into()
 }

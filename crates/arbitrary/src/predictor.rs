@@ -24,13 +24,13 @@ use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 use tch::{Device, Kind, Tensor};
 
+use crate::error::{ArbitraryError, Result};
 use crate::markers::{FolderKind, PREDICTOR_SPEC};
 use crate::run::{start_or_resume, train_to_end};
 use crate::sources::SourceSet;
 use crate::{
     AUGMENT_SCALE, AUGMENT_SHIFT, Schedule, SourceFrame, finished_weights, read_json, same_config,
 };
-use mfm_fm::{FmError, Result};
 use mfm_net::mesh::positions_tensor;
 use mfm_train::TrainSummary;
 use mfm_train::seeding::derived_rng;
@@ -100,12 +100,12 @@ impl PredictorConfig {
     /// A preset by name ([`PRESETS`]).
     ///
     /// # Errors
-    /// [`FmError::Config`] for another name.
+    /// [`ArbitraryError::Config`] for another name.
     pub fn preset(name: &str) -> Result<Self> {
         match name {
             "paper" => Ok(Self::paper()),
             "cpu" => Ok(Self::cpu()),
-            other => Err(FmError::Config(format!(
+            other => Err(ArbitraryError::Config(format!(
                 "unknown predictor preset {other:?}; expected one of {}",
                 PRESETS.join(", ")
             ))),
@@ -202,7 +202,8 @@ pub(crate) fn prepared(
 /// not augmenting).
 ///
 /// # Errors
-/// [`FmError::Config`] for a dataset that is not shapes of its mesh or a
+/// [`ArbitraryError::Dataset`] for a dataset that is not shapes of its
+/// mesh, [`ArbitraryError::Mismatch`] for a
 /// configuration that differs from the stored one; data, network and I/O
 /// errors.
 pub fn train(
@@ -214,7 +215,7 @@ pub fn train(
 ) -> Result<TrainSummary> {
     let data = Dataset::open(dataset)?;
     if data.manifest().channels != 3 {
-        return Err(FmError::Config(format!(
+        return Err(ArbitraryError::Dataset(format!(
             "{}: the predictor learns from shapes (3-channel position signals), the dataset has {} channels",
             dataset.display(),
             data.manifest().channels
@@ -222,7 +223,7 @@ pub fn train(
     }
     let template = data.mesh().clone();
     if template.num_vertices() < config.eigenvectors {
-        return Err(FmError::Config(format!(
+        return Err(ArbitraryError::Dataset(format!(
             "{}: the template has {} vertices, fewer than the {} eigenvectors the predictor \
              learns: make the dataset from a finer mesh (mfm dataset pairs --mesh, refined with \
              mfm remesh --subdivide 1, or a larger --coarse-faces)",
@@ -232,7 +233,7 @@ pub fn train(
         )));
     }
     crate::markers::refuse_imported(run_dir)?;
-    std::fs::create_dir_all(run_dir).map_err(|e| FmError::io(run_dir, e))?;
+    std::fs::create_dir_all(run_dir).map_err(|e| ArbitraryError::io(run_dir, e))?;
     let spec_path = run_dir.join(PREDICTOR_SPEC);
     let targets_path = run_dir.join(TARGETS_FILE);
     let targets: Vec<f64> = if spec_path.is_file() {
@@ -240,7 +241,7 @@ pub fn train(
         same_config(run_dir, &spec.config, config)?;
         let t = mfm_files::npy::read::<f64>(&targets_path)?;
         if t.shape != [template.num_vertices(), config.eigenvectors] {
-            return Err(FmError::format(
+            return Err(ArbitraryError::format(
                 &targets_path,
                 format!("shape {:?} does not fit the dataset's template", t.shape),
             ));
@@ -324,7 +325,7 @@ impl EigenPredictor {
     pub fn load(run_dir: &Path) -> Result<Self> {
         let kind = FolderKind::of(run_dir);
         if kind != FolderKind::PredictorRun {
-            return Err(FmError::RunFolder(format!(
+            return Err(ArbitraryError::RunFolder(format!(
                 "{}: {}, not an eigenvector predictor run (mfm train --mode predictor)",
                 run_dir.display(),
                 kind.is()
@@ -384,7 +385,7 @@ impl EigenPredictor {
         )?;
         let moved = mesh
             .with_positions(p.clone())
-            .map_err(|e| FmError::Config(e.to_string()))?;
+            .map_err(|e| ArbitraryError::Source(e.to_string()))?;
         let tensors = MeshTensors::new(&moved)?;
         let y = self.predict_tensor(&tensors, &positions_tensor(&p, Device::Cpu))?;
         Ok(Vec::<f32>::try_from(y.to_kind(Kind::Float).flatten(0, -1))?)

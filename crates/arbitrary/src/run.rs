@@ -18,7 +18,7 @@ use mfm_train::{Objective, RunNames, TrainSummary, TrainingLoop};
 use tch::Device;
 
 use crate::Schedule;
-use mfm_fm::{FmError, Result};
+use crate::error::{ArbitraryError, Result};
 
 /// What a checkpoint's `rng` field says.
 const RNG: &str = "every random choice of step s is a pure function of (seed, s)";
@@ -37,9 +37,9 @@ pub const RESUMABLE_SPEC_FIELDS: &[&str] = &[
 
 /// Reads a run description as a JSON value.
 fn read_value(path: &Path) -> Result<serde_json::Value> {
-    let text = std::fs::read_to_string(path).map_err(|e| FmError::io(path, e))?;
+    let text = std::fs::read_to_string(path).map_err(|e| ArbitraryError::io(path, e))?;
     serde_json::from_str(&text)
-        .map_err(|e| FmError::format(path, format!("not readable as JSON: {e}")))
+        .map_err(|e| ArbitraryError::format(path, format!("not readable as JSON: {e}")))
 }
 
 /// Refuses to resume `run_dir` from the checkpoint `checkpoint` (of
@@ -138,14 +138,14 @@ impl<F: FnMut(&PoissonNet, u64) -> Result<f64>> StepClosure<F> {
 }
 
 impl<F: FnMut(&PoissonNet, u64) -> Result<f64>> Objective for StepClosure<F> {
-    type Error = FmError;
+    type Error = ArbitraryError;
 
     fn step(&mut self, net: &PoissonNet, step: u64) -> Result<f64> {
         (self.step)(net, step)
     }
 
     fn checkpoint_files(&self) -> Result<Vec<(String, Vec<u8>)>> {
-        let bytes = std::fs::read(&self.spec).map_err(|e| FmError::io(&self.spec, e))?;
+        let bytes = std::fs::read(&self.spec).map_err(|e| ArbitraryError::io(&self.spec, e))?;
         Ok(vec![(self.spec_file.clone(), bytes)])
     }
 }

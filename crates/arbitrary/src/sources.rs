@@ -10,8 +10,8 @@ use mfm_geometry::operators::cotangent_laplacian;
 use mfm_noise::NoiseKind;
 use mfm_solver::{ScreenedPoisson, SymbolicAnalysis};
 
+use crate::error::{ArbitraryError, Result};
 use mfm_fm::context::MeshContext;
-use mfm_fm::{FmError, Result};
 
 /// Per-source [`MeshContext`]s of shapes of one template (same faces).
 ///
@@ -67,16 +67,20 @@ impl SourceSet {
     /// factorizations only).
     ///
     /// # Errors
-    /// [`FmError::Config`] for a wrong vertex count or non-finite positions;
+    /// [`ArbitraryError::Source`] for a wrong vertex count or non-finite positions;
     /// a degenerate face; a factorization failure.
     pub fn build(&self, positions: Vec<[f64; 3]>) -> Result<MeshContext> {
         let mesh = self.template.with_positions(positions).map_err(|e| {
-            FmError::Config(format!(
+            ArbitraryError::Source(format!(
                 "a source of the template ({} vertices): {e}",
                 self.template.num_vertices()
             ))
         })?;
-        MeshContext::sharing(&mesh, self.noise, Some(&self.symbolic))
+        Ok(MeshContext::sharing(
+            &mesh,
+            self.noise,
+            Some(&self.symbolic),
+        )?)
     }
 
     /// The context of source `index` at `positions`, from the cache when it

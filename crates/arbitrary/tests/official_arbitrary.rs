@@ -49,7 +49,7 @@ fn import_with(
     config: &Path,
     predictor: Option<&Path>,
     out: &Path,
-) -> mfm_fm::Result<ArbitraryImportRecord> {
+) -> mfm_arbitrary::Result<ArbitraryImportRecord> {
     let mesh = template();
     let path = fixture("template.obj");
     import_official_arbitrary(

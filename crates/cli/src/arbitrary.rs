@@ -2,8 +2,9 @@
 //! `mfm eval-arbitrary` for an arbitrary-source run: the wiring around
 //! `mfm_arbitrary`.
 
-use crate::flow::{SampleArgs, TrainArgs};
 use crate::mesh::{load_mesh_checked, mesh_path};
+use crate::sample::SampleArgs;
+use crate::train::TrainArgs;
 use anyhow::{Context, Result, bail};
 use mfm_arbitrary::flow::ArbitrarySampler;
 use mfm_arbitrary::folders::{
@@ -15,27 +16,12 @@ use mfm_fm::device::DeviceChoice;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
-/// What `mfm train` trains.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub enum TrainMode {
-    /// A flow on one mesh (the default; `--config`/`--preset`).
-    Flow,
-    /// The eigenvector predictor of the arbitrary-source model, on a
-    /// dataset of template shapes (`mfm dataset pairs` OUT/train).
-    Predictor,
-    /// The arbitrary-source flow, on a pairs dataset with a finished
-    /// `--predictor` run.
-    Arbitrary,
-}
-
 /// Runs `mfm train --mode predictor|arbitrary`; returns whether `stop`
 /// ended it (the caller exits with 130).
-pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<bool> {
-    let kind = match a.mode {
-        TrainMode::Predictor => RunKind::Predictor,
-        TrainMode::Arbitrary => RunKind::Flow,
-        TrainMode::Flow => unreachable!("the flow mode is `mfm train`'s own"),
-    };
+pub fn train(a: &TrainArgs, kind: RunKind, stop: &AtomicBool) -> Result<bool> {
+    if a.noise.is_some() || a.device.is_some() {
+        bail!("--noise and --device are options of --mode flow");
+    }
     if kind == RunKind::Predictor && (a.predictor.is_some() || a.no_eigenvectors) {
         bail!("--predictor and --no-eigenvectors are options of --mode arbitrary");
     }

@@ -32,14 +32,14 @@ pub enum Command {
     /// Train a flow-matching model on a dataset (checkpoints, resumable;
     /// Ctrl-C writes a checkpoint).
     #[cfg(feature = "network")]
-    Train(crate::flow::TrainArgs),
+    Train(crate::train::TrainArgs),
     /// Train a flow-matching model (needs the `network` feature).
     #[cfg(not(feature = "network"))]
     Train(crate::unavailable::Unavailable),
     /// Generate signals with a trained run on any triangulation of the
     /// training surface.
     #[cfg(feature = "network")]
-    Sample(crate::flow::SampleArgs),
+    Sample(crate::sample::SampleArgs),
     /// Generate signals with a trained run (needs the `network` feature).
     #[cfg(not(feature = "network"))]
     Sample(crate::unavailable::Unavailable),
@@ -101,9 +101,9 @@ pub fn run(cmd: Command) -> Result<()> {
         Command::Eval(args) => crate::eval::eval(args),
         Command::Remesh(a) => a.run(),
         #[cfg(feature = "network")]
-        Command::Train(args) => crate::flow::train(args),
+        Command::Train(args) => crate::train::train(args),
         #[cfg(feature = "network")]
-        Command::Sample(args) => crate::flow::sample(args),
+        Command::Sample(args) => crate::sample::sample(args),
         #[cfg(feature = "network")]
         Command::Net(cmd) => crate::net::run(cmd),
         #[cfg(feature = "network")]

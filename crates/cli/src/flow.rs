@@ -1,203 +1,23 @@
-//! `mfm train` and `mfm sample`: the commands that run the network (built
-//! with the `network` feature).
+//! `mfm train --mode flow` and `mfm sample` of a flow run: a flow on one
+//! training mesh (built with the `network` feature).
+
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+use anyhow::{Context, Result, bail};
+use mfm_fm::checkpoint::CONFIG_FILE;
+use mfm_fm::config::RunConfig;
+use mfm_fm::run_folder::{Overrides, RunFolder};
+use mfm_fm::sample::{SampleOptions, Sampler};
+use mfm_fm::sample_folder::{SampleFolder, run_sample_options};
 
 use crate::mesh::{load_mesh_checked, mesh_path};
-use anyhow::{Context, Result, bail};
-use clap::Args;
-use mfm_fm::checkpoint::CONFIG_FILE;
-use mfm_fm::config::{OdeMethod, RunConfig};
-use mfm_fm::device::DeviceChoice;
-use mfm_fm::run_folder::{Overrides, RunFolder};
-use mfm_fm::sample::{SAMPLE_FILES, SampleOptions, Sampler};
-use mfm_fm::sample_folder::{SampleFolder, check_output_folder, run_sample_options};
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use crate::sample::SampleArgs;
+use crate::train::TrainArgs;
 
-/// Arguments of `mfm train`.
-#[derive(Args)]
-pub struct TrainArgs {
-    /// Run configuration (TOML; every field has a default, unknown fields
-    /// are an error). Without it, --preset gives the configuration. With
-    /// --mode predictor or arbitrary: the `config` object of a run's
-    /// predictor.json / arbitrary.json (JSON for a .json file, else TOML),
-    /// whose schedule takes every setting of the training loop (lr_schedule,
-    /// ema, adam_beta1/2, adam_eps, keep_checkpoints, keep_at, log_every).
-    #[arg(long, conflicts_with = "preset")]
-    pub(crate) config: Option<PathBuf>,
-    /// Named configuration: `cpu` (scalar signals, minutes on a laptop),
-    /// `cpu-deform` (shapes: `cpu` conditioned on the source xyz, 3000
-    /// steps, for `mfm dataset deform` and `mfm dataset import` data), `paper` (the authors' human-pose recipe, for a GPU) or
-    /// `paper-elastic` (their elastic-deformation recipe). With --mode
-    /// predictor or arbitrary: `cpu` (default) or `paper` (the official
-    /// arbitrary-source configurations).
-    #[arg(long)]
-    pub(crate) preset: Option<String>,
-    /// What to train: flow (one mesh, the default), predictor (the
-    /// arbitrary-source model's eigenvector predictor, on OUT/train of
-    /// `mfm dataset pairs`) or arbitrary (the arbitrary-source flow, on the
-    /// same dataset, with --predictor).
-    #[arg(long, value_enum, default_value = "flow")]
-    pub(crate) mode: crate::arbitrary::TrainMode,
-    /// The finished predictor run the arbitrary-source flow conditions on
-    /// (--mode arbitrary).
-    #[arg(long)]
-    pub(crate) predictor: Option<PathBuf>,
-    /// --mode arbitrary without the predicted eigenvectors (zeros in their
-    /// conditioning channels): an ablation of the positional encoding.
-    #[arg(long)]
-    pub(crate) no_eigenvectors: bool,
-    /// Dataset folder (overrides the configuration's dataset.path).
-    #[arg(long)]
-    pub(crate) dataset: Option<PathBuf>,
-    /// Run folder: config, log, checkpoints, final model.
-    #[arg(long)]
-    pub(crate) out: PathBuf,
-    /// Total training steps (overrides train.steps).
-    #[arg(long)]
-    pub(crate) steps: Option<u64>,
-    /// Seed (overrides train.seed).
-    #[arg(long)]
-    pub(crate) seed: Option<u64>,
-    /// Noise the flow starts from (overrides noise.kind): matern:TAU,
-    /// matern-normalized:C, matern-smooth:TAU:P (smoother: for sampling on
-    /// much finer meshes), white, naive, explicit:K:TAU.
-    #[arg(long)]
-    pub(crate) noise: Option<mfm_noise::NoiseKind>,
-    /// Where to train: auto (a GPU when libtorch sees one), cpu or cuda
-    /// (overrides train.device; with --resume, continues the run there).
-    #[arg(long)]
-    pub(crate) device: Option<DeviceChoice>,
-    /// Continue the run in --out from its newest valid checkpoint.
-    #[arg(long)]
-    pub(crate) resume: bool,
-    /// No progress bar.
-    #[arg(long)]
-    pub(crate) quiet: bool,
-}
-
-/// Arguments of `mfm sample`.
-#[derive(Args)]
-pub struct SampleArgs {
-    /// Run folder written by `mfm train` (its final model, or its newest
-    /// checkpoint).
-    #[arg(long)]
-    pub(crate) run: PathBuf,
-    /// Mesh to generate on: any triangulation of the training surface.
-    #[arg(long, required_unless_present = "source", conflicts_with = "source")]
-    pub(crate) mesh: Option<crate::mesh::MeshSpec>,
-    /// Source mesh of an arbitrary-source run (`mfm train --mode
-    /// arbitrary`): any mesh of a shape like the template's, of any
-    /// triangulation; targets are generated over it.
-    #[arg(long)]
-    pub(crate) source: Option<crate::mesh::MeshSpec>,
-    /// Number of samples (with --x0: the file's count).
-    #[arg(long, default_value_t = 16)]
-    pub(crate) n: usize,
-    /// Start the ODE from these noises instead of drawing them: a .npy of
-    /// shape [N, V, C] (float32 or float64; V the --mesh's vertices, C the
-    /// run's channels), used as given (not scaled or centred), in the run's
-    /// training frame (the identity for `mfm import`ed runs). Gives N
-    /// samples; --seed is then unused.
-    #[arg(long, conflicts_with_all = ["n", "source", "seed"])]
-    pub(crate) x0: Option<PathBuf>,
-    /// Draw the starting noise on this mesh (the run's training mesh, or any
-    /// coarser triangulation of the --mesh surface, in the same units) and
-    /// carry it to --mesh (closest point, barycentric weights): samples on
-    /// a fine mesh that start from the very noise of the same seed's
-    /// samples on the coarse one, without the frequencies the coarse mesh
-    /// cannot hold.
-    #[arg(long, value_name = "MESH", conflicts_with_all = ["x0", "source"])]
-    pub(crate) noise_from: Option<crate::mesh::MeshSpec>,
-    /// ODE steps (default: the run's sample.steps).
-    #[arg(long)]
-    pub(crate) steps: Option<usize>,
-    /// Integrator: midpoint or euler (default: the run's).
-    #[arg(long)]
-    pub(crate) method: Option<OdeMethod>,
-    /// Where to run the network: auto (a GPU when libtorch sees one), cpu
-    /// or cuda. Samples agree across devices up to round-off.
-    #[arg(long, default_value = "auto")]
-    pub(crate) device: DeviceChoice,
-    /// Seed of the initial noise.
-    #[arg(long, default_value_t = 0)]
-    pub(crate) seed: u64,
-    /// Output folder: samples.npy [N, V, C] (f32), mesh.ply, the first
-    /// --ply samples as PLY, samples.png, timing.json.
-    #[arg(long)]
-    pub(crate) out: PathBuf,
-    /// How many samples to also write as PLY files.
-    #[arg(long, default_value_t = 4)]
-    pub(crate) ply: usize,
-    /// Sample from the run's checkpoint of this step (its weight average
-    /// when the run has one) instead of its final model: the snapshots
-    /// `train.keep_at` keeps, for curves of quality against training.
-    #[arg(long)]
-    pub(crate) step: Option<u64>,
-    /// With --step: the checkpoint's trained weights, not its weight
-    /// average (runs with train.ema keep both).
-    #[arg(long, requires = "step")]
-    pub(crate) raw_weights: bool,
-    /// Write into a non-empty --out folder: replaces only what `mfm sample`
-    /// writes (samples.npy, mesh.ply, samples.png, timing.json,
-    /// sample_NNN.ply, stale ones of an earlier run included).
-    #[arg(long)]
-    pub(crate) force: bool,
-}
-
-/// Runs `mfm train`.
-pub fn train(a: TrainArgs) -> Result<()> {
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = Arc::clone(&stop);
-        let out = a.out.clone();
-        // A second Ctrl-C (or SIGTERM, SIGHUP) ends the process at once:
-        // its temporaries (a checkpoint or model half written) and its lock
-        // go; a run folder this command created goes too unless it holds a
-        // checkpoint, the user's progress.
-        let installed = ctrlc::set_handler(move || {
-            if stop.swap(true, Ordering::SeqCst) {
-                let progress =
-                    mfm_train::checkpoint::list_checkpoints(&out).is_ok_and(|c| !c.is_empty());
-                if progress {
-                    mfm_files::interrupt::clean_up_temporaries();
-                    eprintln!(
-                        "\nmfm: killed; removed this command's temporaries, the run's checkpoints are intact"
-                    );
-                } else {
-                    mfm_files::interrupt::clean_up();
-                    eprintln!("\nmfm: killed; removed what this command had written");
-                }
-                mfm_files::interrupt::exit_now(130);
-            }
-            eprintln!(
-                "\nmfm: stopping after this step and writing a checkpoint (Ctrl-C again to kill)"
-            );
-        });
-        if let Err(e) = installed {
-            eprintln!(
-                "mfm: warning: cannot install the Ctrl-C handler ({e}); Ctrl-C will lose the steps since the last checkpoint"
-            );
-        }
-    }
-    if !a.resume {
-        // never inside the dataset it reads, nor in a folder another command owns
-        mfm_files::Outputs::new()
-            .inputs(a.dataset.as_deref())
-            .folder(&a.out)
-            .check()?;
-    }
-    let lock = crate::output::lock_folder(&a.out)?;
-    if a.mode != crate::arbitrary::TrainMode::Flow {
-        if a.config.is_some() || a.noise.is_some() || a.device.is_some() {
-            bail!("--config, --noise and --device are options of --mode flow");
-        }
-        if crate::arbitrary::train(&a, &stop)? {
-            drop(lock);
-            std::process::exit(130);
-        }
-        return Ok(());
-    }
+/// Runs `mfm train --mode flow` (the checks and the interrupt handler of
+/// [`crate::train::train`] done); returns whether `stop` ended it.
+pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<bool> {
     if a.predictor.is_some() || a.no_eigenvectors {
         bail!("--predictor and --no-eigenvectors are options of --mode arbitrary");
     }
@@ -281,7 +101,7 @@ pub fn train(a: TrainArgs) -> Result<()> {
     if let Some(line) = t.flow().frame_summary() {
         println!("{line}");
     }
-    let summary = run.train(&stop, !a.quiet)?;
+    let summary = run.train(stop, !a.quiet)?;
     println!("{}", summary.line());
     if let Some(m) = &summary.model {
         println!("final model: {}", m.display());
@@ -292,72 +112,12 @@ pub fn train(a: TrainArgs) -> Result<()> {
             a.out.display()
         );
     }
-    if summary.stopped {
-        drop(lock);
-        std::process::exit(130);
-    }
-    Ok(())
+    Ok(summary.stopped)
 }
 
-/// Reads the `--x0` starting noise: a float `[N, V, C]` `.npy`.
-fn read_start_noise(path: &Path) -> Result<mfm_fm::sample::StartNoise> {
-    let array = mfm_files::npy::read::<f32>(path)?;
-    let shape = array.shape.clone();
-    let [n, v, c] = shape[..] else {
-        bail!(
-            "--x0 {}: shape {shape:?}; starting noise must be [samples, vertices, channels]",
-            path.display()
-        );
-    };
-    if n == 0 || v == 0 || c == 0 {
-        bail!("--x0 {}: shape {shape:?} holds no noise", path.display());
-    }
-    let values = array.values;
-    if let Some(i) = values.iter().position(|x| !x.is_finite()) {
-        bail!(
-            "--x0 {}: value {} (sample {}, vertex {}, channel {}) is not finite",
-            path.display(),
-            values[i],
-            i / (v * c),
-            (i / c) % v,
-            i % c
-        );
-    }
-    Ok(mfm_fm::sample::StartNoise {
-        values,
-        shape: [n, v, c],
-    })
-}
-
-/// Runs `mfm sample`.
-pub fn sample(a: SampleArgs) -> Result<()> {
-    if a.n == 0 {
-        bail!("--n must be at least 1");
-    }
-    let start = match &a.x0 {
-        Some(path) => Some(read_start_noise(path)?),
-        None => None,
-    };
-    let _lock = crate::output::lock_folder(&a.out)?;
-    check_output_folder(&a.out, a.force, "mfm sample", &SAMPLE_FILES)?;
-    if crate::arbitrary::is_arbitrary_run(&a.run) {
-        if a.step.is_some() {
-            bail!(
-                "--step samples a flow run's checkpoint; {} is an arbitrary-source run, which samples its final model",
-                a.run.display()
-            );
-        }
-        return crate::arbitrary::sample(&a);
-    }
-    if a.run.join(mfm_arbitrary::markers::PREDICTOR_SPEC).is_file() {
-        bail!(
-            "--run {}: is an eigenvector predictor run (mfm train --mode predictor), which \
-             generates nothing itself: train an arbitrary-source flow with it \
-             (mfm train --mode arbitrary --predictor {}) and sample that run with --source",
-            a.run.display(),
-            a.run.display()
-        );
-    }
+/// Runs `mfm sample` of a flow run (the checks of [`crate::sample::sample`]
+/// done; `start` the `--x0` noise).
+pub fn sample(a: &SampleArgs, start: Option<mfm_fm::sample::StartNoise>) -> Result<()> {
     let Some(mesh_arg) = a.mesh.as_ref() else {
         bail!(
             "--source is for arbitrary-source runs (mfm train --mode arbitrary); {} is a flow on one mesh: pass --mesh",

@@ -10,6 +10,8 @@ mod dataset;
 mod eval;
 #[cfg(feature = "network")]
 mod flow;
+#[cfg(feature = "network")]
+mod interrupt;
 mod mesh;
 #[cfg(feature = "network")]
 mod net;
@@ -18,7 +20,11 @@ mod official;
 mod openmp;
 mod output;
 mod preinit;
+#[cfg(feature = "network")]
+mod sample;
 mod spectral;
+#[cfg(feature = "network")]
+mod train;
 #[cfg(not(feature = "network"))]
 mod unavailable;
 

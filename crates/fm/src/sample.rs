@@ -439,7 +439,7 @@ impl Sampler {
     /// weight average (`ema.safetensors`) when it has one, else its weights.
     ///
     /// # Errors
-    /// As [`checkpoint::verify_checkpoint`], and network loading errors.
+    /// As [`crate::checkpoint::verify_checkpoint`], and network loading errors.
     pub fn load_checkpoint(dir: impl AsRef<Path>, device: Option<Device>) -> Result<Self> {
         Self::load_checkpoint_weights(dir, device, true)
     }

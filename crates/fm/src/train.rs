@@ -23,9 +23,11 @@
 //!    the same loss of `v = (out - f_t) / (1 - t)`, i.e. `|out - f_1|^2 /
 //!    (1 - t)^2` with the weight clipped at
 //!    [`CLEAN_WEIGHT_MAX`];
-//! 6. backward, clip the global gradient norm, one [`Adam`] step at the
-//!    scheduled learning rate, then (with `train.ema`) the weight average
-//!    moves towards the new weights. Everything is `f32`.
+//! 6. backward; then the training loop every mfm network shares
+//!    ([`mfm_train::TrainingLoop`], this module's [`Objective`] being steps
+//!    1-5) clips the global gradient norm, takes one [`mfm_train::Adam`]
+//!    step at the scheduled learning rate and (with `train.ema`) moves the
+//!    weight average towards the new weights. Everything is `f32`.
 //!
 //! ## Determinism and resuming
 //! Every random choice is a pure function of the seed and the step `s`:
