@@ -2,12 +2,12 @@
 //!
 //! Flow matching on triangle meshes (DESIGN.md sections 6-8): training a
 //! PoissonNet along the rectified-flow path from Matérn noise, ODE sampling
-//! on any triangulation, run configurations and checkpoints. The datasets
-//! and generators live in the libtorch-free [`mfm_data`] crate and are
-//! re-exported here under their old paths (the metrics and quality
-//! measures are the `mfm-eval` crate); the
-//! arbitrary-source model, built on this crate's context, Adam, seeding
-//! and checkpoint format, is the `mfm-arbitrary` crate.
+//! on any triangulation, run configurations and the flow's run folders. The
+//! datasets and generators are the libtorch-free [`mfm_data`] crate, the
+//! metrics and quality measures `mfm-eval`, the training loop (Adam,
+//! schedules, seeding, checkpoints) [`mfm_train`]; the arbitrary-source
+//! model, built on this crate's context, path and sampling, is the
+//! `mfm-arbitrary` crate.
 
 pub mod checkpoint;
 pub mod config;
@@ -23,7 +23,3 @@ pub mod sample_folder;
 pub mod train;
 
 pub use error::{FmError, Result};
-pub use mfm_data::{
-    DataError, InMemorySignals, SignalSource, dataset, deformations, experiment, gmm, pictures,
-    signals,
-};

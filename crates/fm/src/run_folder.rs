@@ -247,7 +247,7 @@ pub fn locate_dataset(stored: &Path, run_dir: &Path) -> Option<PathBuf> {
         for keep in 1..=parts.len().min(3) {
             let mut candidate = ancestor.to_path_buf();
             candidate.extend(&parts[parts.len() - keep..]);
-            if candidate.join(crate::dataset::MANIFEST_FILE).is_file() {
+            if candidate.join(mfm_data::dataset::MANIFEST_FILE).is_file() {
                 return Some(candidate);
             }
         }

@@ -52,7 +52,7 @@ use crate::config::{OdeMethod, SampleConfig};
 use crate::context::MeshContext;
 use crate::device::DeviceChoice;
 use crate::error::{FmError, Result};
-use crate::signals::InMemorySignals;
+use mfm_data::InMemorySignals;
 
 /// Relative size difference above which [`Sampler::surface_warnings`]
 /// speaks up.

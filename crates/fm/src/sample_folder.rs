@@ -161,7 +161,7 @@ impl SampleFolder<'_> {
         mfm_files::space::ensure_space(&outputs[0], mfm_files::npy::file_bytes(&shape, 4))?;
         self.remove_stale_plys(&outputs)?;
         let target = sampler.prepare(mesh)?;
-        let keep = n.min(self.ply.max(crate::pictures::SHOWN));
+        let keep = n.min(self.ply.max(mfm_data::pictures::SHOWN));
         let request = SampleRequest {
             count: n,
             seed: self.seed,
@@ -175,7 +175,7 @@ impl SampleFolder<'_> {
             signals.write_ply(i, mesh, path)?;
         }
         let title = format!("{n} samples on {v} vertices");
-        crate::pictures::signals(mesh, &signals, "sample", &title, &outputs[2])?;
+        mfm_data::pictures::signals(mesh, &signals, "sample", &title, &outputs[2])?;
         let timing = SampleTiming {
             samples: n,
             vertices: v,

@@ -58,7 +58,8 @@
 //! ```no_run
 //! use std::sync::Arc;
 //! use std::sync::atomic::AtomicBool;
-//! use mfm_fm::{InMemorySignals, config::RunConfig, train::Trainer};
+//! use mfm_data::InMemorySignals;
+//! use mfm_fm::{config::RunConfig, train::Trainer};
 //! let mesh = mfm_geometry::procedural::icosphere(2);
 //! let v = mesh.num_vertices();
 //! let signals = Arc::new(InMemorySignals::new(vec![0.5; 4 * v], 4, v, 1).unwrap());
@@ -93,7 +94,7 @@ use crate::device::DeviceChoice;
 use crate::error::{FmError, Result};
 use crate::path::rectified_path;
 use crate::sample::{conditioning, offset_tensor};
-use crate::signals::{FramedPositions, SignalSource};
+use mfm_data::signals::{FramedPositions, SignalSource};
 
 /// Description of the randomness recorded in every checkpoint.
 const RNG_DESCRIPTION: &str = "ChaCha8 streams keyed by (seed, purpose), stream = step or epoch; \

@@ -12,7 +12,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use mfm_fm::InMemorySignals;
+use mfm_data::InMemorySignals;
 use mfm_fm::config::{OdeMethod, RunConfig};
 use mfm_fm::device::DeviceChoice;
 use mfm_fm::sample::{SampleOptions, Sampler};

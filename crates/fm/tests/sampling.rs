@@ -5,7 +5,7 @@
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use mfm_fm::InMemorySignals;
+use mfm_data::InMemorySignals;
 use mfm_fm::checkpoint::{self, FlowSpec};
 use mfm_fm::config::{OdeMethod, RunConfig};
 use mfm_fm::device::DeviceChoice;

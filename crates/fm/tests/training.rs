@@ -8,11 +8,12 @@ use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
+use mfm_data::{InMemorySignals, SignalSource};
+use mfm_fm::FmError;
 use mfm_fm::checkpoint;
 use mfm_fm::config::{NoiseScale, RunConfig};
 use mfm_fm::device::DeviceChoice;
 use mfm_fm::train::Trainer;
-use mfm_fm::{FmError, InMemorySignals, SignalSource};
 use mfm_geometry::{TriMesh, procedural};
 use mfm_train::LOG_HEADER;
 use mfm_train::LrSchedule;

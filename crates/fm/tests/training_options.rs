@@ -10,7 +10,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use mfm_fm::InMemorySignals;
+use mfm_data::InMemorySignals;
 use mfm_fm::config::RunConfig;
 use mfm_fm::device::DeviceChoice;
 use mfm_fm::path::TimeSampling;
