@@ -69,7 +69,9 @@ enum Cmd {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
-    /// Formatting and clippy checks (warnings are errors).
+    /// Formatting and clippy checks (warnings are errors), and a packaging
+    /// dry run of every publishable crate (`cargo publish --dry-run
+    /// --workspace --no-verify`).
     Lint,
     /// Build the `mfm` Python package's wheel (release, abi3) into
     /// target/wheels/.
@@ -322,6 +324,18 @@ fn main() -> Result<()> {
                 "--",
                 "-D",
                 "warnings",
+            ]))?;
+            // Every publishable crate packages, in dependency order, each
+            // resolving its mfm dependencies against the ones packaged
+            // before it: manifests (description, license, readme), the files
+            // that go in, dependency versions. Seconds: nothing is compiled
+            // (`--no-verify`).
+            run(cargo(&env).args([
+                "publish",
+                "--dry-run",
+                "--workspace",
+                "--no-verify",
+                "--allow-dirty",
             ]))
         }
         Cmd::Pretrain(PretrainCmd::Gmm(args)) => {
