@@ -1,13 +1,4 @@
-//! # mfm-fm
-//!
-//! Flow matching on triangle meshes (DESIGN.md sections 6-8): training a
-//! PoissonNet along the rectified-flow path from Matérn noise, ODE sampling
-//! on any triangulation, run configurations and checkpoints. The datasets
-//! and generators live in the libtorch-free [`mfm_data`] crate and are
-//! re-exported here under their old paths (the metrics and quality
-//! measures are the `mfm-eval` crate); the
-//! arbitrary-source model, built on this crate's context, Adam, seeding
-//! and checkpoint format, is the `mfm-arbitrary` crate.
+#![doc = include_str!("../README.md")]
 
 pub mod adam;
 pub mod checkpoint;
