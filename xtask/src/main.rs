@@ -220,7 +220,7 @@ enum BenchCmd {
     /// PoissonNet training step (forward, backward, Adam) and batch-1
     /// inference at the presets (`mfm net bench`), in rounds; with
     /// `--baseline`, interleaved with another `mfm` binary. Compared with the
-    /// reference PyTorch times of DESIGN.md section 9.
+    /// reference PyTorch times of docs/BENCHMARKS.md, "Reference numbers".
     Net {
         /// Mesh file or builtin:NAME.
         #[arg(long, default_value = "../shared/meshes/bunny.off")]

@@ -94,7 +94,7 @@ impl FromStr for KindName {
     }
 }
 
-/// A noise distribution on the vertices of a mesh (DESIGN.md §4, paper §3).
+/// A noise distribution on the vertices of a mesh (docs/conventions.md, "Noise"; paper §3).
 ///
 /// With `L` the PSD cotangent Laplacian, `M` the lumped mass, `n ~ N(0, I)`
 /// one standard normal per vertex, `(lambda_i, phi_i)` the generalized
@@ -275,7 +275,7 @@ impl NoiseKind {
     /// let mesh = procedural::icosphere(2);
     /// let ops = mfm_geometry::operators::Operators::new(&mesh).unwrap();
     /// let pairs = spectrum::eigenpairs(&ops.laplacian, &ops.mass, 8).unwrap();
-    /// let v = Self::Matern { tau: 10.0 }.spectral_variance(&pairs, &ops.mass, 1.0).unwrap();
+    /// let v = NoiseKind::Matern { tau: 10.0 }.spectral_variance(&pairs, &ops.mass, 1.0).unwrap();
     /// assert_eq!(v[1], (pairs.values[1] + 10.0).powi(-2));
     /// ```
     pub fn spectral_variance(

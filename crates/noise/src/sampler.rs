@@ -368,7 +368,7 @@ impl Components {
 /// per column, in `f64` for both precisions.
 ///
 /// Conventions: `L` PSD cotangent Laplacian, `M` lumped mass (positive at
-/// every vertex), `Gamma = ||M^-1 L||_F` (DESIGN.md §3).
+/// every vertex), `Gamma = ||M^-1 L||_F` (docs/conventions.md, "Spectra").
 ///
 /// Cost of construction: operators `O(V + F)`; Matérn kinds one sparse
 /// Cholesky factorization of `L + tau M`; explicit kind one eigensolve for

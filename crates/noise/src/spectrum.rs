@@ -1,5 +1,5 @@
 //! Spectral diagnostics: the paper's three properties of a noise
-//! distribution, measured on samples (DESIGN.md §4).
+//! distribution, measured on samples (docs/conventions.md, "Noise").
 //!
 //! A signal `f` (one value per vertex) has spectral coefficients
 //! `c_i = phi_i^T M f` on the generalized eigenpairs `L phi_i = lambda_i M phi_i`
