@@ -1,9 +1,6 @@
 //! Embeds an rpath to libtorch's library folder into this crate's tests, so
 //! they run without `LD_LIBRARY_PATH` (see `crates/fm/build.rs`).
 
-#[path = "../kernels/libtorch_link.rs"]
-mod libtorch_link;
-
 fn main() {
-    libtorch_link::link_libtorch_of("MFM_NET", "mfm-net");
+    mfm_libtorch_link::link_libtorch_of("MFM_NET", "mfm-net");
 }

@@ -3,9 +3,6 @@
 //! `libtorch_cuda.so` linked. The folder comes from the net crate's build
 //! script (`DEP_MFM_NET_LIBTORCH_LIB`); see `crates/net/build.rs`.
 
-#[path = "../kernels/libtorch_link.rs"]
-mod libtorch_link;
-
 fn main() {
     // declared in every build, so that one without the network does not
     // rerun this script on every source change
@@ -14,5 +11,5 @@ fn main() {
         // built without the network: nothing links libtorch
         return;
     }
-    libtorch_link::link_libtorch_of("MFM_NET", "mfm-net");
+    mfm_libtorch_link::link_libtorch_of("MFM_NET", "mfm-net");
 }

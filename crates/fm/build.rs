@@ -3,9 +3,6 @@
 //! `libtorch_cuda.so` linked. The folder comes from the net crate's build
 //! script (`DEP_MFM_NET_LIBTORCH_LIB`); see `crates/net/build.rs`.
 
-#[path = "../kernels/libtorch_link.rs"]
-mod libtorch_link;
-
 fn main() {
-    libtorch_link::link_libtorch_of("MFM_NET", "mfm-net");
+    mfm_libtorch_link::link_libtorch_of("MFM_NET", "mfm-net");
 }

@@ -1,6 +1,6 @@
 //! Embeds an rpath to libtorch's library folder into this crate's binaries and
 //! tests (and, with a CUDA libtorch, keeps `libtorch_cuda.so` linked; see
-//! `libtorch_link.rs`), passes the folder on to dependent crates, and compiles the C++ shim
+//! `mfm-libtorch-link`), passes the folder on to dependent crates, and compiles the C++ shim
 //! (`csrc/mfm_autograd.cpp`) that lets autograd call operations written in Rust.
 //!
 //! torch-sys reports the folder it linked against as `DEP_TCH_LIBTORCH_LIB`
@@ -18,13 +18,10 @@
 
 use std::path::PathBuf;
 
-#[path = "libtorch_link.rs"]
-mod libtorch_link;
-
 fn main() {
     println!("cargo:rerun-if-env-changed=LIBTORCH_CXX11_ABI");
     println!("cargo:rerun-if-changed=csrc/mfm_autograd.cpp");
-    let lib = libtorch_link::link_libtorch_of("TCH", "torch-sys");
+    let lib = mfm_libtorch_link::link_libtorch_of("TCH", "torch-sys");
     println!("cargo:libtorch_lib={lib}");
 
     let root = PathBuf::from(&lib).join("..");

@@ -4,10 +4,7 @@
 //! kernels crate's build script (`DEP_MFM_KERNELS_LIBTORCH_LIB`), which also
 //! compiles the C++ autograd shim; see `crates/kernels/build.rs`.
 
-#[path = "../kernels/libtorch_link.rs"]
-mod libtorch_link;
-
 fn main() {
-    let lib = libtorch_link::link_libtorch_of("MFM_KERNELS", "mfm-kernels");
+    let lib = mfm_libtorch_link::link_libtorch_of("MFM_KERNELS", "mfm-kernels");
     println!("cargo:libtorch_lib={lib}");
 }

@@ -1,7 +1,7 @@
 //! `cargo xtask bench net`: PoissonNet training-step and batch-1 inference
 //! times (`mfm net bench`) at the three presets, repeated in rounds and,
 //! with `--baseline`, interleaved with another `mfm` binary, next to the
-//! reference PyTorch implementation's times (DESIGN.md section 9).
+//! reference PyTorch implementation's times (docs/BENCHMARKS.md, "Reference numbers").
 //!
 //! Why rounds and interleaving: on a shared virtual machine the speed of the
 //! same binary drifts by 20-40% within minutes, so one run of each side says
@@ -16,7 +16,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// A preset with its benchmark batch and the reference PyTorch
-/// PoissonNet's times on the 2-core benchmark machine (DESIGN.md section 9:
+/// PoissonNet's times on the 2-core benchmark machine (docs/BENCHMARKS.md, "Reference numbers":
 /// training step in seconds, batch-1 inference in seconds).
 struct Reference {
     preset: &'static str,
@@ -207,7 +207,7 @@ fn table(refs: &[&Reference], times: &[[Vec<RunTimes>; 2]], bench: &NetBench<'_>
     let _ = writeln!(
         s,
         "mesh {}, {} threads, {} rounds of {} timed steps; median [range] over rounds; \
-         reference: DESIGN.md section 9, goal: a third of it\n",
+         reference: docs/BENCHMARKS.md, \"Reference numbers\", goal: a third of it\n",
         bench.mesh, bench.threads, bench.rounds, bench.steps
     );
     let base = bench.baseline.is_some();

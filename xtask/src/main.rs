@@ -69,7 +69,9 @@ enum Cmd {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
-    /// Formatting and clippy checks (warnings are errors).
+    /// Formatting and clippy checks (warnings are errors), and a packaging
+    /// dry run of every publishable crate (`cargo publish --dry-run
+    /// --workspace --no-verify`).
     Lint,
     /// Build the `mfm` Python package's wheel (release, abi3) into
     /// target/wheels/.
@@ -218,7 +220,7 @@ enum BenchCmd {
     /// PoissonNet training step (forward, backward, Adam) and batch-1
     /// inference at the presets (`mfm net bench`), in rounds; with
     /// `--baseline`, interleaved with another `mfm` binary. Compared with the
-    /// reference PyTorch times of DESIGN.md section 9.
+    /// reference PyTorch times of docs/BENCHMARKS.md, "Reference numbers".
     Net {
         /// Mesh file or builtin:NAME.
         #[arg(long, default_value = "../shared/meshes/bunny.off")]
@@ -322,6 +324,18 @@ fn main() -> Result<()> {
                 "--",
                 "-D",
                 "warnings",
+            ]))?;
+            // Every publishable crate packages, in dependency order, each
+            // resolving its mfm dependencies against the ones packaged
+            // before it: manifests (description, license, readme), the files
+            // that go in, dependency versions. Seconds: nothing is compiled
+            // (`--no-verify`).
+            run(cargo(&env).args([
+                "publish",
+                "--dry-run",
+                "--workspace",
+                "--no-verify",
+                "--allow-dirty",
             ]))
         }
         Cmd::Pretrain(PretrainCmd::Gmm(args)) => {

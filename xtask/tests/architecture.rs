@@ -1,7 +1,7 @@
 //! docs/ARCHITECTURE.md's table of crates is a map a newcomer trusts: every
 //! crate of the workspace has its row, its dependencies are the ones its
 //! Cargo.toml names (each on a row above it: the layering), and its size
-//! is within 15% of the lines its sources hold. When a crate grows, this
+//! is within 15% (or 100 lines) of the lines its sources hold. When a crate grows, this
 //! test names the row to update and the count to write.
 #![allow(clippy::unwrap_used)]
 
@@ -12,6 +12,8 @@ use std::process::Command;
 /// How far a row's size may drift from the sources before it must be
 /// rewritten.
 const SIZE_TOLERANCE: f64 = 0.15;
+/// ... or by this many lines (a row says ~N.Nk).
+const SIZE_SLACK: f64 = 100.0;
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -87,11 +89,21 @@ fn the_crate_table_matches_the_workspace() {
     let rows = table(&text);
     assert!(rows.len() > 10, "no crate table found");
     let out = Command::new(env!("CARGO"))
-        .args(["metadata", "--format-version", "1", "--no-deps", "--offline"])
+        .args([
+            "metadata",
+            "--format-version",
+            "1",
+            "--no-deps",
+            "--offline",
+        ])
         .current_dir(&root)
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let meta: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let short = |name: &str| name.trim_start_matches("mfm-").to_owned();
     let mut problems = Vec::new();
@@ -121,12 +133,14 @@ fn the_crate_table_matches_the_workspace() {
         }
         for d in &deps {
             if rows.get(d).is_none_or(|r| r.order >= row.order) {
-                problems.push(format!("{name}: its dependency {d} is not on a row above it"));
+                problems.push(format!(
+                    "{name}: its dependency {d} is not on a row above it"
+                ));
             }
         }
         let manifest = Path::new(package["manifest_path"].as_str().unwrap());
         let lines = source_lines(&manifest.parent().unwrap().join("src")) as f64;
-        if (lines - row.lines).abs() > SIZE_TOLERANCE * lines {
+        if (lines - row.lines).abs() > (SIZE_TOLERANCE * lines).max(SIZE_SLACK) {
             problems.push(format!(
                 "{name}: the row says ~{:.1}k lines, its sources hold {lines} (write ~{:.1}k)",
                 row.lines / 1000.0,
@@ -142,8 +156,14 @@ fn the_crate_table_matches_the_workspace() {
         .collect();
     for name in rows.keys() {
         if !names.contains(name) {
-            problems.push(format!("{name}: a row for a crate the workspace does not have"));
+            problems.push(format!(
+                "{name}: a row for a crate the workspace does not have"
+            ));
         }
     }
-    assert!(problems.is_empty(), "docs/ARCHITECTURE.md:\n{}", problems.join("\n"));
+    assert!(
+        problems.is_empty(),
+        "docs/ARCHITECTURE.md:\n{}",
+        problems.join("\n")
+    );
 }

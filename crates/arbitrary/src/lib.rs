@@ -1,38 +1,4 @@
-//! The arbitrary-source model (the paper's section 5.1 and supplementary,
-//! "Arbitrary 3D human shapes model"): one network that generates target
-//! shapes over source meshes it never saw.
-//!
-//! Two networks, trained one after the other on a pairs dataset
-//! ([`mfm_data::pairs`]: poses of body shapes of one template):
-//!
-//! 1. The **eigenvector predictor** ([`predictor`]): a PoissonNet (linear
-//!    head) that maps a source's vertex positions to the first `k`
-//!    eigenvectors of the template's Laplacian
-//!    ([`mfm_data::eigenbasis::Eigenbasis`]), trained on every mesh of the
-//!    dataset with a mass-weighted MSE. On a new source it gives a
-//!    positional encoding that follows the body, not the triangulation.
-//! 2. The **flow** ([`flow`]): a PoissonNet (NJF head) whose every block is
-//!    conditioned on the source's positions, `t` and the frozen predictor's
-//!    output on the source (`3 + 1 + k` channels), trained on (source,
-//!    target) pairs with each source's own operators, noise and Poisson
-//!    solves ([`sources::SourceSet`]: one symbolic analysis, numeric
-//!    factorizations per source).
-//!
-//! ## Frames
-//! By default ([`SourceFrame::Own`]) every source is moved into its own
-//! canonical frame ([`mfm_geometry::frame`]: bounding box centred, largest
-//! extent 1) and its target by the same map; generated targets come back
-//! through the inverse, with the source's mass-weighted centroid added. A
-//! run imported from the authors' code ([`official`]) uses
-//! [`SourceFrame::AsIs`] instead: sources as they are, targets left
-//! mass-mean zero, as the official model was trained and samples. With
-//! augmentation (the official recipe) both then get one random scale in
-//! `[0.7, 1.3]` and one Gaussian shift of standard deviation 0.15 per item.
-//!
-//! ## Randomness
-//! Every random choice of step `s` (items, times, noise, augmentation) is a
-//! pure function of `(seed, s)`, so a resumed run repeats an uninterrupted
-//! one.
+#![doc = include_str!("../README.md")]
 
 pub mod error;
 pub mod evaluate;

@@ -340,8 +340,9 @@ impl Dataset {
         }
         let manifest_path = dir.join(MANIFEST_FILE);
         if !manifest_path.exists() {
-            use crate::layout::{HOLDOUT, REFERENCE, TRAIN};
-            let sets: Vec<String> = [TRAIN, REFERENCE, HOLDOUT]
+            // the set names of an experiment folder (`crate::layout` writes
+            // them; they live in the leaf `mfm_files::owned`)
+            let sets: Vec<String> = mfm_files::owned::SETS
                 .iter()
                 .filter(|s| dir.join(s).join(MANIFEST_FILE).is_file())
                 .map(|s| dir.join(s).display().to_string())

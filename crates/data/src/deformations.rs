@@ -1,5 +1,5 @@
-//! Deformation datasets (DESIGN.md sections 7-8; the paper's reposing and
-//! elastic-deformation experiments at CPU scale).
+//! Deformation datasets (docs/conventions.md, "Experiments"; the paper's
+//! reposing and elastic-deformation experiments at CPU scale).
 //!
 //! The paper's deformation data (SMPL poses, IPC simulations) is not
 //! available here, so shapes come from a *known* parametric space instead:

@@ -1,5 +1,5 @@
 //! Train/test meshes for the GMM experiment (paper section 5, supplementary
-//! "GMM datasets"; DESIGN.md section 8).
+//! "GMM datasets"; docs/conventions.md, "Experiments").
 //!
 //! The model is trained on a **uniform** triangulation and evaluated on a
 //! **non-uniform triangulation of the same surface**, in which one half has

@@ -1,14 +1,4 @@
-//! # mfm-data
-//!
-//! The data side of flow matching on meshes, without libtorch: datasets of
-//! signals over one mesh (folder format, streaming reads, validation), the
-//! GMM and deformation generators, their experiment meshes and folder
-//! layout with previews, and the arbitrary-source model's data: (source,
-//! target) shape pairs of a template ([`pairs`]) and the template's
-//! eigenvectors with fixed signs ([`eigenbasis`]). What is measured of
-//! generated sets against these data (metrics, quality fits, the `mfm eval`
-//! protocol) is the `mfm-eval` crate; `mfm-fm` trains and samples on top of
-//! this one; `mfm` built without its network feature uses both alone.
+#![doc = include_str!("../README.md")]
 
 pub mod dataset;
 pub mod deformations;

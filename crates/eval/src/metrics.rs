@@ -1,4 +1,4 @@
-//! Evaluation metrics for sets of signals on one mesh (DESIGN.md section 7,
+//! Evaluation metrics for sets of signals on one mesh (docs/metrics.md,
 //! the paper's supplementary "Evaluation Metrics").
 //!
 //! Every metric is built on the **mass-weighted L2 distance** between two

@@ -1,6 +1,6 @@
 //! Sample quality: measures that a flat, noise-like or collapsed sample set
 //! cannot pass, beside the distribution metrics of [`crate::metrics`]
-//! (which such sets can: DESIGN.md section 7).
+//! (which such sets can: docs/metrics.md, "Distribution metrics").
 //!
 //! - **GMM signals** ([`fit_bumps`], [`GmmQuality`]): every sample is fitted
 //!   with the generator's own family, `K` bumps

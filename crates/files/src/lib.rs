@@ -1,31 +1,4 @@
-//! File output for mfm that never loses a user's data, and `.npy` input
-//! that never trusts its header.
-//!
-//! - [`atomic`]: [`AtomicFile`] and [`write_atomic`] (and [`write_json`]
-//!   on top of it), the one way mfm writes
-//!   a file: an exclusive temporary file in the target's folder, synced, then
-//!   renamed over the target; removed again on any failure. Existing targets
-//!   that are not regular files (folders, devices, FIFOs, sockets) are
-//!   refused; a symbolic link is followed and its target written, the link
-//!   itself stays.
-//! - [`guard`]: [`Outputs`], the check a command runs before it writes
-//!   anything: no output may be one of the command's inputs, lie inside an
-//!   input folder, or be another output of the same command.
-//! - [`undo`]: [`Undo`], which removes what a failed command created (and
-//!   only that); [`Outputs::prepare`] checks a command's outputs and returns
-//!   the [`Undo`] for them.
-//! - [`lock`]: [`FolderLock`], one writer per run, dataset or sample
-//!   folder (an advisory lock beside it, naming its holder).
-//! - [`matrix_market`]: sparse matrices as Matrix Market coordinate files.
-//! - [`space`]: free space on the file system of a path.
-//! - [`npy`]: reading `.npy` arrays (shape checked against the file's length
-//!   before anything is allocated) and writing them, also in streamed
-//!   batches for outputs larger than memory.
-//! - [`text`]: [`fmt_f64`], how every number mfm writes as text is formatted
-//!   (shortest digits that parse back to the same bits).
-//!
-//! Nothing here depends on meshes or networks; every mfm crate that writes
-//! files uses it.
+#![doc = include_str!("../README.md")]
 
 pub mod atomic;
 pub mod error;

@@ -1,5 +1,5 @@
 //! Training a PoissonNet velocity field by rectified flow matching
-//! (DESIGN.md section 6, paper section 4).
+//! (docs/conventions.md, "Flow matching"; paper section 4).
 //!
 //! Before anything else the training mesh goes to the run's frame
 //! ([`crate::config::FrameChoice`], by default the canonical frame of

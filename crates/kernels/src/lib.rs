@@ -1,43 +1,4 @@
-//! # mfm-kernels
-//!
-//! The tensor operations under PoissonNet (`mfm-net`), on libtorch through
-//! `tch`: Rust kernels that run as autograd nodes, and one mesh's
-//! operators as differentiable tensor operations. The network's layers
-//! live in `mfm-net` and call into this crate, so a reader finds the math
-//! of a layer there and the machinery that makes it fast here.
-//!
-//! ## Modules
-//! - [`autograd`]: custom autograd operations in Rust
-//!   ([`autograd::apply_custom`], [`autograd::apply_linear`]) through a
-//!   small C++ shim compiled by this crate's build script, and
-//!   [`autograd::parallel_for`] on libtorch's intra-op threads.
-//! - [`mesh`]: [`MeshTensors`], one mesh's `G`, `G^T`, face means, mass
-//!   means and the cached Cholesky factor of `L + eps I` as differentiable
-//!   operations.
-//! - [`dense`]: `linear` and the complex layers' products on faer's GEMM
-//!   (three real products per complex one from 64 channels), as autograd
-//!   nodes, with the product counter the cost model is tested against.
-//! - [`fused`]: single-pass modulation and magnitude-nonlinearity kernels
-//!   (and the torch graphs they replace, as references and as the path on
-//!   other devices).
-//! - `gather` (private): the mesh operators' gather kernels (`G`,
-//!   `G^T A2`, face means, the paired divergence), AVX2 + FMA dispatch and
-//!   prefetch; `fastmath` (private): the vectorizable `f32`
-//!   approximations the fused kernels use.
-//! - [`profile`]: per-section timers; [`runtime`]: what the linked
-//!   libtorch offers (threads, CUDA, the allocator setting);
-//!   [`error`]: [`KernelError`], the one error type of this crate
-//!   (`mfm-net`'s `NetError` wraps it).
-//!
-//! All kernels write disjoint output rows from libtorch's intra-op threads
-//! through the one pointer wrapper `SyncPtr`, and are generic over the one
-//! element trait `Scalar` (`f32`, `f64`). Results do not depend on the
-//! number of threads.
-//!
-//! This crate links the libtorch 2.13 shared libraries of the project's
-//! Python environment (see `cargo xtask setup`); its build script embeds an
-//! rpath so binaries run without `LD_LIBRARY_PATH` and passes the library
-//! folder on to dependent crates (`DEP_MFM_KERNELS_LIBTORCH_LIB`).
+#![doc = include_str!("../README.md")]
 
 pub mod autograd;
 pub mod dense;

@@ -34,7 +34,7 @@ impl HeadKind {
 /// Hyper-parameters of a [`crate::PoissonNet`]; stored as JSON next to the
 /// weights.
 ///
-/// Architecture (DESIGN.md section 5): `proj_in: Linear(C_in, W)`; a
+/// Architecture (docs/network.md): `proj_in: Linear(C_in, W)`; a
 /// conditioning MLP `Linear(C_e, W), GELU, Linear(W, W)` shared by every block
 /// (absent when `cond_channels == 0`); `blocks` Poisson blocks of width `W`
 /// with `vector_layers` complex layers each; then the head.

@@ -1,4 +1,4 @@
-//! Losses on mesh signals (DESIGN.md section 6).
+//! Losses on mesh signals (docs/conventions.md, "Flow matching").
 //!
 //! All are averages over batch items and channels, weighted so that they
 //! approximate integrals over the surface divided by its area (and so do not
@@ -54,7 +54,7 @@ pub fn area_weighted_mse(mesh: &MeshTensors, a: &Tensor, b: &Tensor) -> Result<T
     Ok(per_item.mean(a.kind()) / (total_weight * channels))
 }
 
-/// The flow-matching loss of DESIGN.md section 6 for a target velocity
+/// The flow-matching loss (docs/conventions.md, "Flow matching") for a target velocity
 /// `delta: [B, V, C]`: mass-weighted MSE of the vertex output against
 /// `delta`, plus (NJF head) the area-weighted MSE of the Jacobian output
 /// against `G delta`, with equal weights.

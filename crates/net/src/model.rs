@@ -1,7 +1,7 @@
 //! PoissonNet: the network assembled from its [`crate::layers`], saving and
 //! loading.
 //!
-//! The layers follow DESIGN.md section 5. Face features are complex numbers
+//! The layers follow docs/network.md. Face features are complex numbers
 //! stored as real tensors `[B, 2F, C]` (rows `2f, 2f + 1` the real and
 //! imaginary parts, i.e. the two tangent components of face `f`; see
 //! [`crate::mesh`]). Every face operation is equivariant under a rotation of
@@ -132,7 +132,7 @@ fn natural_key(s: &str) -> Vec<(String, u64)> {
         .collect()
 }
 
-/// PoissonNet (DESIGN.md section 5) on a tch [`nn::VarStore`].
+/// PoissonNet (docs/network.md) on a tch [`nn::VarStore`].
 ///
 /// Input conventions: vertex features `x: [B, V, C_in]` (or `[V, C_in]`),
 /// conditioning `cond: [B, V, C_e]` (or `[V, C_e]`, shared by the batch), all

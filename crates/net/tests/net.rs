@@ -141,7 +141,7 @@ fn last_complex_layer_after_the_divergence_equals_the_face_form() {
 fn a_block_equals_its_specification_with_the_solve_output_formed() {
     // the block folds the columns of MLP1's first weight that read `u` into
     // the last complex layer before the solve (model docs); value and every
-    // gradient must equal the block as DESIGN.md writes it: u = solve(div)
+    // gradient must equal the block as docs/network.md writes it: u = solve(div)
     // with the mean removed, h = [x, u, e], x + gamma1 MLP1(h), ...
     tch::manual_seed(5);
     let mesh = procedural::icosphere(2);

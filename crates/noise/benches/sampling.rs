@@ -1,4 +1,4 @@
-//! Matérn sampling (tau = 100, DESIGN.md §9): a batch of 64 scalar samples,
+//! Matérn sampling (tau = 100, as in the reference numbers of docs/BENCHMARKS.md): a batch of 64 scalar samples,
 //! in f64 and f32, on icospheres of 2.6k, 10k and 41k vertices and on the
 //! bunny (3.5k vertices) when the shared meshes are present; plus the
 //! per-mesh setup (operators + factorization) and the normals alone (white

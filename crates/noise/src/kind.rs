@@ -7,6 +7,8 @@ use mfm_files::fmt_f64;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{NoiseError, Result};
+use crate::sampler::explicit_weights;
+use crate::spectrum::{Eigenpairs, check_vertices};
 
 /// Default screening weight `tau` of the paper's experiments (`tau = 100`).
 pub const DEFAULT_TAU: f64 = 100.0;
@@ -92,7 +94,7 @@ impl FromStr for KindName {
     }
 }
 
-/// A noise distribution on the vertices of a mesh (DESIGN.md §4, paper §3).
+/// A noise distribution on the vertices of a mesh (docs/conventions.md, "Noise"; paper §3).
 ///
 /// With `L` the PSD cotangent Laplacian, `M` the lumped mass, `n ~ N(0, I)`
 /// one standard normal per vertex, `(lambda_i, phi_i)` the generalized
@@ -245,6 +247,84 @@ impl NoiseKind {
             }
             _ => Ok(()),
         }
+    }
+
+    /// The closed-form `Var(c_i)` of this kind for each eigenpair
+    /// `(lambda_i, phi_i)` in `pairs` of a mesh with lumped mass `mass` and
+    /// `gamma = ||M^-1 L||_F` (docs/conventions.md, "Noise"):
+    ///
+    /// - naive: `phi_i^T M^2 phi_i`;
+    /// - white: `1`;
+    /// - Matérn: `1 / (lambda_i + tau)^2`; without screening (`tau == 0`),
+    ///   `1 / lambda_i^2` and `0` for the zero modes (eigenvalues at or below
+    ///   `1e-8` times the largest one in `pairs`, as for the explicit kind);
+    /// - normalized Matérn: `Gamma / (lambda_i + c Gamma)^2`;
+    /// - smooth Matérn `(tau, p)`: `tau^(2p-2) / (lambda_i + tau)^(2p)`;
+    /// - explicit `(k, tau)`: `1 / (lambda_i + tau)^2` for `i < k` (`0` for the
+    ///   zero modes when `tau == 0`), `0` for `i >= k`.
+    ///
+    /// Cost: `O(V K)` for naive, `O(K)` otherwise.
+    ///
+    /// # Errors
+    /// [`NoiseError::SizeMismatch`] if `mass` and the eigenvectors disagree on
+    /// the vertex count.
+    ///
+    /// # Example
+    /// ```
+    /// use mfm_noise::{NoiseKind, procedural, spectrum};
+    /// let mesh = procedural::icosphere(2);
+    /// let ops = mfm_geometry::operators::Operators::new(&mesh).unwrap();
+    /// let pairs = spectrum::eigenpairs(&ops.laplacian, &ops.mass, 8).unwrap();
+    /// let v = NoiseKind::Matern { tau: 10.0 }.spectral_variance(&pairs, &ops.mass, 1.0).unwrap();
+    /// assert_eq!(v[1], (pairs.values[1] + 10.0).powi(-2));
+    /// ```
+    pub fn spectral_variance(
+        &self,
+        pairs: &Eigenpairs,
+        mass: &[f64],
+        gamma: f64,
+    ) -> Result<Vec<f64>> {
+        check_vertices(pairs, mass.len())?;
+        let values = &pairs.values;
+        Ok(match *self {
+            Self::Naive => (0..values.len())
+                .map(|i| {
+                    pairs
+                        .vectors
+                        .col(i)
+                        .iter()
+                        .zip(mass)
+                        .map(|(p, m)| (p * m) * (p * m))
+                        .sum()
+                })
+                .collect(),
+            Self::White => vec![1.0; values.len()],
+            Self::Matern { tau: 0.0 } => explicit_weights(values, 0.0)
+                .into_iter()
+                .map(|w| w * w)
+                .collect(),
+            Self::Matern { tau } => values.iter().map(|l| (l + tau).powi(-2)).collect(),
+            Self::MaternNormalized { c } => values
+                .iter()
+                .map(|l| gamma / (l + c * gamma).powi(2))
+                .collect(),
+            Self::MaternSmooth { tau, order } => {
+                let p = order as i32;
+                values
+                    .iter()
+                    .map(|l| tau.powi(2 * p - 2) / (l + tau).powi(2 * p))
+                    .collect()
+            }
+            Self::Explicit { k, tau } => {
+                let kk = k.min(values.len());
+                let mut v: Vec<f64> = explicit_weights(&values[..kk], tau)
+                    .into_iter()
+                    .map(|w| w * w)
+                    .collect();
+                v.resize(values.len(), 0.0);
+                v
+            }
+        })
     }
 
     /// Short name of the kind without parameters: `naive`, `white`,

@@ -71,6 +71,7 @@ use std::sync::Arc;
 use crate::error::{NoiseError, Result};
 use crate::kind::NoiseKind;
 use crate::rng::{MAX_CHANNELS, fill_normals, fill_normals_f32, stream};
+use crate::spectrum::Theory;
 
 /// Regularization of Matérn noise without screening (`tau = 0`), relative
 /// to `Gamma = ||M^-1 L||_F`: the sampler factors `L + eps M` with
@@ -367,7 +368,7 @@ impl Components {
 /// per column, in `f64` for both precisions.
 ///
 /// Conventions: `L` PSD cotangent Laplacian, `M` lumped mass (positive at
-/// every vertex), `Gamma = ||M^-1 L||_F` (DESIGN.md §3).
+/// every vertex), `Gamma = ||M^-1 L||_F` (docs/conventions.md, "Spectra").
 ///
 /// Cost of construction: operators `O(V + F)`; Matérn kinds one sparse
 /// Cholesky factorization of `L + tau M`; explicit kind one eigensolve for
@@ -622,13 +623,15 @@ impl NoiseSampler {
         }
     }
 
-    /// The theoretical `Var(c_i)` of this sampler's noise for the given
-    /// eigenpairs of the same mesh (see [`crate::spectrum::theoretical_variance`]).
+    /// The closed-form statistics of this sampler's noise on its mesh, for
+    /// eigenpairs `pairs` of the same mesh ([`Theory::new`] with the
+    /// sampler's mass and `Gamma`; its variances are
+    /// [`NoiseKind::spectral_variance`]).
     ///
     /// # Errors
     /// [`NoiseError::SizeMismatch`] if `pairs` has another vertex count.
-    pub fn theoretical_variance(&self, pairs: &Eigenpairs) -> Result<Vec<f64>> {
-        crate::spectrum::theoretical_variance(self.kind, pairs, &self.mass, self.gamma)
+    pub fn theory(&self, pairs: &Eigenpairs) -> Result<Theory> {
+        Theory::new(self.kind, pairs, &self.mass, self.gamma)
     }
 
     /// Draws `samples` samples of `channels` independent channels each, from

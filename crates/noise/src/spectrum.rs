@@ -1,5 +1,5 @@
 //! Spectral diagnostics: the paper's three properties of a noise
-//! distribution, measured on samples (DESIGN.md §4).
+//! distribution, measured on samples (docs/conventions.md, "Noise").
 //!
 //! A signal `f` (one value per vertex) has spectral coefficients
 //! `c_i = phi_i^T M f` on the generalized eigenpairs `L phi_i = lambda_i M phi_i`
@@ -16,7 +16,7 @@
 //!    `1 / sqrt(N)`, and the largest of `P` such values is about
 //!    `sqrt(2 ln P)` of them);
 //! 2. **mesh-invariant frequency statistics**: the empirical `Var(c_i)` next
-//!    to its closed form ([`theoretical_variance`]; the ratio should be 1),
+//!    to its closed form ([`NoiseKind::spectral_variance`]; the ratio should be 1),
 //!    and across two meshes ([`compare`]) the 2-Wasserstein distance between
 //!    `N(0, s_a^2)` and `N(0, s_b^2)`, which is `|s_a - s_b|`, frequency by
 //!    frequency (matched by index, with the eigenvalue gap);
@@ -55,7 +55,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{NoiseError, Result};
 use crate::kind::NoiseKind;
-use crate::sampler::{NoiseBatch, NoiseSampler, explicit_weights};
+use crate::sampler::{NoiseBatch, NoiseSampler};
 
 /// Signals projected together by one task of the analysis (a fixed size, so
 /// the sums do not depend on the thread count).
@@ -82,7 +82,7 @@ pub fn eigenpairs(l: &SparseColMat<usize, f64>, mass: &[f64], k: usize) -> Resul
 pub struct Theory {
     /// The kind these numbers describe.
     pub kind: NoiseKind,
-    /// `Var(c_i)` for each eigenpair given (see [`theoretical_variance`]).
+    /// `Var(c_i)` for each eigenpair given (see [`NoiseKind::spectral_variance`]).
     pub variance: Vec<f64>,
     /// `E[f^T M f]` where a closed form exists without all `V` eigenpairs:
     /// naive `sum_v m_v` (the surface area), white `V`, explicit
@@ -106,9 +106,9 @@ impl Theory {
     /// `mass` and `gamma = ||M^-1 L||_F`.
     ///
     /// # Errors
-    /// As [`theoretical_variance`].
+    /// As [`NoiseKind::spectral_variance`].
     pub fn new(kind: NoiseKind, pairs: &Eigenpairs, mass: &[f64], gamma: f64) -> Result<Self> {
-        let variance = theoretical_variance(kind, pairs, mass, gamma)?;
+        let variance = kind.spectral_variance(pairs, mass, gamma)?;
         let energy = match kind {
             NoiseKind::Explicit { k, .. } if k <= pairs.values.len() => {
                 Some(variance.iter().take(k).sum())
@@ -123,86 +123,7 @@ impl Theory {
     }
 }
 
-impl NoiseSampler {
-    /// The closed-form statistics of this sampler's noise on its mesh, for
-    /// eigenpairs `pairs` of the same mesh ([`Theory::new`] with the
-    /// sampler's mass and `Gamma`).
-    ///
-    /// # Errors
-    /// As [`theoretical_variance`].
-    pub fn theory(&self, pairs: &Eigenpairs) -> Result<Theory> {
-        Theory::new(self.kind(), pairs, self.mass(), self.gamma())
-    }
-}
-
-/// Theoretical `Var(c_i)` of `kind` for each eigenpair `(lambda_i, phi_i)`
-/// in `pairs` (DESIGN.md §4):
-///
-/// - naive: `phi_i^T M^2 phi_i`;
-/// - white: `1`;
-/// - Matérn: `1 / (lambda_i + tau)^2`; without screening (`tau == 0`),
-///   `1 / lambda_i^2` and `0` for the zero modes (eigenvalues at or below
-///   `1e-8` times the largest one in `pairs`, as for the explicit kind);
-/// - normalized Matérn: `Gamma / (lambda_i + c Gamma)^2`;
-/// - smooth Matérn `(tau, p)`: `tau^(2p-2) / (lambda_i + tau)^(2p)`;
-/// - explicit `(k, tau)`: `1 / (lambda_i + tau)^2` for `i < k` (`0` for the
-///   zero modes when `tau == 0`), `0` for `i >= k`.
-///
-/// Cost: `O(V K)` for naive, `O(K)` otherwise.
-///
-/// # Errors
-/// [`NoiseError::SizeMismatch`] if `mass` and the eigenvectors disagree on
-/// the vertex count.
-pub fn theoretical_variance(
-    kind: NoiseKind,
-    pairs: &Eigenpairs,
-    mass: &[f64],
-    gamma: f64,
-) -> Result<Vec<f64>> {
-    check_vertices(pairs, mass.len())?;
-    let values = &pairs.values;
-    Ok(match kind {
-        NoiseKind::Naive => (0..values.len())
-            .map(|i| {
-                pairs
-                    .vectors
-                    .col(i)
-                    .iter()
-                    .zip(mass)
-                    .map(|(p, m)| (p * m) * (p * m))
-                    .sum()
-            })
-            .collect(),
-        NoiseKind::White => vec![1.0; values.len()],
-        NoiseKind::Matern { tau: 0.0 } => explicit_weights(values, 0.0)
-            .into_iter()
-            .map(|w| w * w)
-            .collect(),
-        NoiseKind::Matern { tau } => values.iter().map(|l| (l + tau).powi(-2)).collect(),
-        NoiseKind::MaternNormalized { c } => values
-            .iter()
-            .map(|l| gamma / (l + c * gamma).powi(2))
-            .collect(),
-        NoiseKind::MaternSmooth { tau, order } => {
-            let p = order as i32;
-            values
-                .iter()
-                .map(|l| tau.powi(2 * p - 2) / (l + tau).powi(2 * p))
-                .collect()
-        }
-        NoiseKind::Explicit { k, tau } => {
-            let kk = k.min(values.len());
-            let mut v: Vec<f64> = explicit_weights(&values[..kk], tau)
-                .into_iter()
-                .map(|w| w * w)
-                .collect();
-            v.resize(values.len(), 0.0);
-            v
-        }
-    })
-}
-
-fn check_vertices(pairs: &Eigenpairs, vertices: usize) -> Result<()> {
+pub(crate) fn check_vertices(pairs: &Eigenpairs, vertices: usize) -> Result<()> {
     if pairs.vectors.nrows() != vertices {
         return Err(NoiseError::SizeMismatch {
             what: "eigenvector length (vertices)",
@@ -555,7 +476,7 @@ pub fn analyze(
     a.report(theory)
 }
 
-/// The spectrum of one mesh in a [`SpectrumFile`].
+/// The spectrum of one mesh (one entry of the `mfm spectrum` report).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MeshSpectrum {
     /// The mesh as the user named it (a path or a builtin).
@@ -649,6 +570,7 @@ impl MeshSpectrum {
     }
 }
 
+#[cfg(feature = "cli-output")]
 impl MeshSpectrum {
     /// The spectrum on one line: sizes, the largest relative variance
     /// error, the largest correlation against its sampling level, the
@@ -670,6 +592,7 @@ max |corr| = {:.3} (sampling level {:.3}); mean f^T M f = {:.4e}",
     }
 }
 
+#[cfg(feature = "cli-output")]
 impl SpectrumFile {
     /// One line per later mesh against the first: the largest `W2` and
     /// relative standard-deviation difference over the frequencies.
@@ -713,6 +636,7 @@ impl SpectrumFile {
     }
 }
 
+#[cfg(feature = "cli-output")]
 /// The report of `mfm spectrum`: one noise kind's spectrum on several
 /// meshes, each later mesh compared with the first.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -1,8 +1,8 @@
 //! Many samples without holding them all: samples `0..N` of a seed are
 //! drawn in chunks ([`CHUNK`] samples unless asked otherwise) and handed,
 //! in order, to a
-//! consumer (an `.npy` file, a [`SpectralAnalyzer`](crate::SpectralAnalyzer),
-//! a statistic). Memory stays at one chunk, `chunk x V x C` values, whatever
+//! consumer (a [`SpectralAnalyzer`](crate::SpectralAnalyzer), a statistic,
+//! or with the `cli-output` feature an `.npy` file: `write_npy`). Memory stays at one chunk, `chunk x V x C` values, whatever
 //! `N` is, and the values are the same bits as one [`NoiseSampler::sample`]
 //! call (samples are indexed, not drawn in sequence). Statistics summed per
 //! chunk depend on the chunk size in their last bits.
@@ -22,12 +22,16 @@
 //! assert_eq!(seen, 600);
 //! ```
 
+#[cfg(feature = "cli-output")]
 use std::path::Path;
 
-use crate::error::{NoiseError, Result};
+#[cfg(feature = "cli-output")]
+use crate::error::NoiseError;
+use crate::error::Result;
 use crate::sampler::{NoiseBatch, NoiseSampler};
 
-/// Samples per chunk of [`write_npy`] (and the cli's spectra).
+/// Samples per chunk of the sampling streams (`write_npy`, the spectra of
+/// `mfm spectrum`).
 pub const CHUNK: usize = 256;
 
 /// Calls `each(batch, first)` for `[count, V, channels]` batches that cover
@@ -55,6 +59,7 @@ pub fn for_each_chunk(
     Ok(())
 }
 
+#[cfg(feature = "cli-output")]
 /// What [`write_npy`] measured on the way.
 #[derive(Clone, Debug, PartialEq)]
 pub struct WrittenNoise {
@@ -64,6 +69,7 @@ pub struct WrittenNoise {
     pub first_signal: Vec<f64>,
 }
 
+#[cfg(feature = "cli-output")]
 /// Writes samples `0..samples` of `seed` (`channels` each) to the `.npy`
 /// file `path`, `[samples, V, channels]` row-major `f64`, atomically;
 /// `progress(done)` is called after each chunk.
@@ -116,6 +122,7 @@ pub fn write_npy(
     })
 }
 
+#[cfg(feature = "cli-output")]
 /// The JSON [`NoiseFiles::write`] writes beside the samples.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct NoiseSummary {
@@ -141,6 +148,7 @@ pub struct NoiseSummary {
     pub mean_energy: f64,
 }
 
+#[cfg(feature = "cli-output")]
 /// A noise file and its summary: what `mfm noise` writes.
 #[derive(Clone, Copy, Debug)]
 pub struct NoiseFiles<'a> {
@@ -158,6 +166,7 @@ pub struct NoiseFiles<'a> {
     pub seed: u64,
 }
 
+#[cfg(feature = "cli-output")]
 impl NoiseFiles<'_> {
     /// [`write_npy`], then the [`NoiseSummary`] of the file as pretty JSON,
     /// atomically.

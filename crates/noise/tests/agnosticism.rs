@@ -1,5 +1,5 @@
 //! Acceptance: Matérn noise is triangulation agnostic, naive noise is not
-//! (paper §3.3 property 2, DESIGN.md §4).
+//! (paper §3.3 property 2, docs/conventions.md, "Noise").
 //!
 //! A mesh is compared with two refinements of the *same* piecewise-flat
 //! surface (new vertices are edge midpoints, so nothing moves): a uniform

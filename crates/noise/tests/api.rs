@@ -175,19 +175,23 @@ fn analyzer_recovers_known_coefficients() {
 fn naive_theory_is_phi_m2_phi_and_white_is_one() {
     let mesh = common::blob(2);
     let (mass, pairs) = common::eigen(&mesh, 5);
-    let naive = spectrum::theoretical_variance(NoiseKind::Naive, &pairs, &mass, 1.0).unwrap();
+    let naive = NoiseKind::Naive
+        .spectral_variance(&pairs, &mass, 1.0)
+        .unwrap();
     for i in 0..5 {
         let want: f64 = (0..mass.len())
             .map(|v| (pairs.vectors[(v, i)] * mass[v]).powi(2))
             .sum();
         assert!((naive[i] - want).abs() < 1e-14 * want);
     }
-    let white = spectrum::theoretical_variance(NoiseKind::White, &pairs, &mass, 1.0).unwrap();
+    let white = NoiseKind::White
+        .spectral_variance(&pairs, &mass, 1.0)
+        .unwrap();
     assert_eq!(white, vec![1.0; 5]);
     let g = 3.0;
-    let nm =
-        spectrum::theoretical_variance(NoiseKind::MaternNormalized { c: 0.5 }, &pairs, &mass, g)
-            .unwrap();
+    let nm = NoiseKind::MaternNormalized { c: 0.5 }
+        .spectral_variance(&pairs, &mass, g)
+        .unwrap();
     assert!((nm[2] - g / (pairs.values[2] + 1.5).powi(2)).abs() < 1e-15);
 }
 

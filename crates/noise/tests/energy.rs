@@ -1,5 +1,5 @@
 //! Acceptance: bounded high-frequency content (paper §3.3 property 3,
-//! DESIGN.md §4). Matérn noise's expected total energy `E[f^T M f]`
+//! docs/conventions.md, "Noise"). Matérn noise's expected total energy `E[f^T M f]`
 //! converges under refinement; white noise's is `V`, so it grows about 4x
 //! per midpoint subdivision.
 //!

@@ -1,5 +1,5 @@
 //! Acceptance: the spectral coefficients `c_i = phi_i^T M f` of sampled noise
-//! have the per-frequency variances of DESIGN.md §4 and are independent.
+//! have the per-frequency variances of docs/conventions.md, "Noise", and are independent.
 //!
 //! How the tolerances follow from the sample count (they hold for any seed
 //! with overwhelming probability, so the fixed seeds are not tuned):

@@ -1,4 +1,4 @@
-//! Screened Poisson `L + tau M` (tau = 100, as in DESIGN.md §9): factorization
+//! Screened Poisson `L + tau M` (tau = 100, as in the reference numbers of docs/BENCHMARKS.md): factorization
 //! (symbolic + numeric, and numeric only) and a batch of 64 right-hand sides
 //! (f64 and f32), on the bunny (3.5k vertices) and icospheres of 41k and 164k
 //! vertices.

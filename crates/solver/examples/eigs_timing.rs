@@ -1,7 +1,8 @@
 //! Timing of the sparse generalized eigensolver: the `k` smallest eigenpairs
 //! of `L phi = lambda M phi` for a mesh (default: icosphere 6, 40962
-//! vertices, and k = 512, the size of DESIGN.md's scipy reference: `eigsh`
-//! shift-invert, 512 pairs of a 43k-vertex mesh in 58 s).
+//! vertices, and k = 512, the size of the scipy reference in
+//! docs/BENCHMARKS.md, "Reference numbers": `eigsh` shift-invert, 512 pairs
+//! of a 43k-vertex mesh in 58 s).
 //!
 //! ```text
 //! cargo run --release -p mfm-solver --example eigs_timing -- [MESH] [k] [block] [subspace]

@@ -10,7 +10,7 @@ use mfm_kernels::profile::section;
 
 use super::{Mlp, VectorMlp, dense, gelu};
 
-/// One Poisson block (DESIGN.md section 5): gradient, vector MLP, Poisson
+/// One Poisson block (docs/network.md, "Blocks"): gradient, vector MLP, Poisson
 /// solve with the mean removed, then two LayerScale vertex MLPs.
 #[derive(Debug)]
 pub struct PoissonBlock {

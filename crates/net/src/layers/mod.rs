@@ -1,4 +1,4 @@
-//! PoissonNet's layers, one file per kind (DESIGN.md section 5); the
+//! PoissonNet's layers, one file per kind (docs/network.md); the
 //! network that assembles them is [`crate::model`], the kernels they run on
 //! are [`mfm_kernels`].
 //!

@@ -9,7 +9,7 @@ use mfm_kernels::profile::section;
 
 use super::{ComplexLinear, dense, gelu, linear};
 
-/// Modulated complex MLP on face features (DESIGN.md section 5, step 3).
+/// Modulated complex MLP on face features (docs/network.md, "Blocks", step 3).
 #[derive(Debug)]
 pub struct VectorMlp {
     modulation: Option<(nn::Linear, nn::Linear)>,

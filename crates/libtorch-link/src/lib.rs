@@ -1,6 +1,4 @@
-//! Link settings shared by the build scripts of every crate whose binaries or
-//! tests link libtorch (kernels, net, fm, arbitrary, cli): included with `#[path]`, since link
-//! arguments printed by a build script reach only that package's own targets.
+#![doc = include_str!("../README.md")]
 
 use std::path::Path;
 
@@ -35,7 +33,6 @@ pub fn emit_link_args(lib: &str) {
 pub fn link_libtorch_of(links: &str, dependency: &str) -> String {
     let var = format!("DEP_{links}_LIBTORCH_LIB");
     println!("cargo:rerun-if-env-changed={var}");
-    println!("cargo:rerun-if-changed=../kernels/libtorch_link.rs");
     let Ok(lib) = std::env::var(&var) else {
         panic!(
             "{dependency} did not report its libtorch folder ({var}); \
