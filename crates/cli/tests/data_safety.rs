@@ -827,6 +827,42 @@ fn arbitrary_runs_check_their_models_and_keep_reports() {
     };
     let args = train(&["--mode", "predictor", "--out", "pred"]);
     ok(d, &args.iter().map(String::as_str).collect::<Vec<_>>());
+    // --config: the run description's `config` object, here with two of
+    // the training loop's settings the presets leave at their defaults
+    let spec: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(d.join("pred/predictor.json")).unwrap()).unwrap();
+    let mut config = spec["config"].clone();
+    config["schedule"]["ema"] = serde_json::json!(0.5);
+    config["schedule"]["log_every"] = serde_json::json!(1);
+    fs::write(d.join("pred.json"), config.to_string()).unwrap();
+    let args = train(&[
+        "--mode",
+        "predictor",
+        "--config",
+        "pred.json",
+        "--out",
+        "pred2",
+    ]);
+    ok(d, &args.iter().map(String::as_str).collect::<Vec<_>>());
+    let written = fs::read_to_string(d.join("pred2/predictor.json")).unwrap();
+    assert!(written.contains("\"ema\": 0.5"), "{written}");
+    let rows = fs::read_to_string(d.join("pred2/train_log.csv")).unwrap();
+    assert_eq!(rows.lines().count(), 3, "a row per step: {rows}");
+    let e = refused(
+        d,
+        &[
+            "train",
+            "--resume",
+            "--mode",
+            "predictor",
+            "--config",
+            "pred.json",
+            "--out",
+            "pred2",
+        ],
+        "drop --config",
+    );
+    assert!(e.contains("predictor.json"), "{e}");
     let args = train(&["--mode", "arbitrary", "--predictor", "pred", "--out", "arb"]);
     ok(d, &args.iter().map(String::as_str).collect::<Vec<_>>());
     let sample = |out: &str| {
