@@ -69,7 +69,7 @@ pub struct FlowConfig {
     /// Poisson blocks.
     pub blocks: usize,
     /// The noise of the source distribution (on each source).
-    #[serde(with = "mfm_fm::config::noise_kind_string")]
+    #[serde(with = "mfm_noise::kind::as_text")]
     pub noise: NoiseKind,
     /// The noise amplitude `sigma`.
     pub sigma: f64,

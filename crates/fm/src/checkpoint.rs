@@ -57,7 +57,7 @@ pub struct FlowSpec {
     /// Channels `C` per vertex of the signals.
     pub channels: usize,
     /// The noise kind (command-line form in the file).
-    #[serde(with = "crate::config::noise_kind_string")]
+    #[serde(with = "mfm_noise::kind::as_text")]
     pub noise: NoiseKind,
     /// Factor applied to every noise sample.
     pub noise_scale: f64,

@@ -355,7 +355,7 @@ pub struct NoiseConfig {
     /// official meshes). With `dataset.frame = "as-is"` it is a tenth of a
     /// mesh unit, whatever the mesh's size; `matern-normalized:C` adapts
     /// `tau` to each mesh instead and needs no frame.
-    #[serde(with = "noise_kind_string")]
+    #[serde(with = "mfm_noise::kind::as_text")]
     pub kind: NoiseKind,
     /// The noise amplitude `sigma`: every sample is `solve(L + tau M,
     /// sigma sqrt(m) n)`, i.e. the unit-amplitude noise times `sigma` (the
@@ -382,24 +382,6 @@ impl Default for NoiseConfig {
             },
             scale: NoiseScale::default(),
         }
-    }
-}
-
-/// Serializes a [`NoiseKind`] as its command-line string (for
-/// `#[serde(with = "mfm_fm::config::noise_kind_string")]`).
-pub mod noise_kind_string {
-    use mfm_noise::NoiseKind;
-    use serde::{Deserialize, Deserializer, Serializer};
-
-    /// Writes `k` as its text form (`matern:100`).
-    pub fn serialize<S: Serializer>(k: &NoiseKind, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_str(&k.to_string())
-    }
-
-    /// Reads a kind from its text form.
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<NoiseKind, D::Error> {
-        let s = String::deserialize(d)?;
-        s.parse().map_err(serde::de::Error::custom)
     }
 }
 

@@ -544,3 +544,43 @@ impl FromStr for NoiseKind {
         Ok(kind)
     }
 }
+
+/// A [`NoiseKind`] in its text form (`"matern:100"`, as the command line
+/// and [`std::str::FromStr`] write it) instead of the tagged form of its
+/// own `Serialize`: for a configuration field, with `#[serde(with =
+/// "mfm_noise::kind::as_text")]`. Reading checks the kind as parsing does.
+///
+/// ```
+/// #[derive(serde::Serialize, serde::Deserialize, Debug, PartialEq)]
+/// struct Config {
+///     #[serde(with = "mfm_noise::kind::as_text")]
+///     noise: mfm_noise::NoiseKind,
+/// }
+/// let c = Config { noise: mfm_noise::NoiseKind::Matern { tau: 100.0 } };
+/// let json = serde_json::to_string(&c).unwrap();
+/// assert_eq!(json, r#"{"noise":"matern:100"}"#);
+/// assert_eq!(serde_json::from_str::<Config>(&json).unwrap(), c);
+/// assert!(serde_json::from_str::<Config>(r#"{"noise":"matern:-1"}"#).is_err());
+/// ```
+pub mod as_text {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    use super::NoiseKind;
+
+    /// Writes `kind` as its text form.
+    ///
+    /// # Errors
+    /// The serializer's.
+    pub fn serialize<S: Serializer>(kind: &NoiseKind, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&kind.to_string())
+    }
+
+    /// Reads a kind from its text form.
+    ///
+    /// # Errors
+    /// A custom error with the parse error's message.
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<NoiseKind, D::Error> {
+        let s = String::deserialize(d)?;
+        s.parse().map_err(serde::de::Error::custom)
+    }
+}
