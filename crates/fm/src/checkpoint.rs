@@ -214,10 +214,18 @@ impl FlowSpec {
     }
 }
 
+/// The files every checkpoint of a flow run lists: the weights, the
+/// network configuration, the optimizer, [`CONFIG_FILE`], [`FLOW_FILE`].
+pub const FLOW_CHECKPOINT_FILES: [&str; 5] = [
+    WEIGHTS_FILE,
+    NET_CONFIG_FILE,
+    OPTIMIZER_FILE,
+    CONFIG_FILE,
+    FLOW_FILE,
+];
+
 /// Reads a flow checkpoint's `state.json` and checks every file it lists
-/// (size, then CRC-32) and that it lists the files every flow checkpoint
-/// needs (weights, network configuration, optimizer, [`CONFIG_FILE`],
-/// [`FLOW_FILE`]).
+/// (size, then CRC-32) and that it lists [`FLOW_CHECKPOINT_FILES`].
 ///
 /// Cost: one read of every file of the checkpoint.
 ///
@@ -225,16 +233,7 @@ impl FlowSpec {
 /// [`FmError::Files`] (`Io`) for a missing or unreadable file, (`Format`)
 /// naming the file that is truncated, corrupted, or unparsable.
 pub fn verify_checkpoint(dir: &Path) -> Result<CheckpointState> {
-    Ok(verify_checkpoint_listing(
-        dir,
-        &[
-            WEIGHTS_FILE,
-            NET_CONFIG_FILE,
-            OPTIMIZER_FILE,
-            CONFIG_FILE,
-            FLOW_FILE,
-        ],
-    )?)
+    Ok(verify_checkpoint_listing(dir, &FLOW_CHECKPOINT_FILES)?)
 }
 
 /// The newest checkpoint of a flow run that passes [`verify_checkpoint`],
@@ -244,16 +243,7 @@ pub fn verify_checkpoint(dir: &Path) -> Result<CheckpointState> {
 /// [`FmError::Files`] (`Io`) if the checkpoint folder cannot be listed.
 pub fn newest_valid_checkpoint(run_dir: &Path) -> Result<NewestValid> {
     Ok(newest_valid_with(run_dir, |dir| {
-        verify_checkpoint_listing(
-            dir,
-            &[
-                WEIGHTS_FILE,
-                NET_CONFIG_FILE,
-                OPTIMIZER_FILE,
-                CONFIG_FILE,
-                FLOW_FILE,
-            ],
-        )
+        verify_checkpoint_listing(dir, &FLOW_CHECKPOINT_FILES)
     })?)
 }
 
