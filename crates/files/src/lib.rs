@@ -21,6 +21,9 @@
 //! - [`npy`]: reading `.npy` arrays (shape checked against the file's length
 //!   before anything is allocated) and writing them, also in streamed
 //!   batches for outputs larger than memory.
+//! - [`run_folder`]: what a training run folder holds as plain files (its
+//!   checkpoints, their `state.json`, the log), for readers without the
+//!   training crates.
 //! - [`text`]: [`fmt_f64`], how every number mfm writes as text is formatted
 //!   (shortest digits that parse back to the same bits).
 //!
@@ -35,6 +38,7 @@ pub mod lock;
 pub mod matrix_market;
 pub mod npy;
 pub mod owned;
+pub mod run_folder;
 pub mod space;
 pub mod text;
 pub mod undo;
