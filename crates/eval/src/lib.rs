@@ -16,6 +16,7 @@
 //!   over the data's own floor, flipped faces;
 //! - [`evaluation`]: the protocol of `mfm eval` on a reference dataset, its
 //!   serializable report and the files it reads and writes;
+//! - [`arbitrary`]: the report of `mfm eval-arbitrary` per held-out set;
 //! - [`pictures`]: the evaluation's pictures (data above samples, shapes
 //!   beside their projections, point-wise means).
 //!
@@ -36,6 +37,7 @@
 //! assert!(m.mmd > 0.0 && m.cov == 0.5); // both flat samples match one reference
 //! ```
 
+pub mod arbitrary;
 pub mod evaluation;
 pub mod metrics;
 pub mod pictures;
