@@ -398,3 +398,37 @@ pub fn shipped_at(dir: &str, model: &str) -> Result<PathBuf> {
     }
     Ok(dir)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_demo_and_the_pretrained_model_share_one_recipe() {
+        let (demo, pretrained) = (crate::demo::demo_config(), pretrain_config());
+        assert!(pretrained.contains("\nthreads = 1\n") && !demo.contains("threads"));
+        assert!(
+            pretrained.contains("\nlr_schedule = { warmup = 250, cosine = 5000, floor = 1e-5 }\n")
+        );
+        // besides the thread count, only the first line and the step count
+        // (where the decay ends) differ
+        let pretrained = pretrained.replace("threads = 1\n", "");
+        let differing: Vec<(&str, &str)> = demo
+            .lines()
+            .zip(pretrained.lines())
+            .filter(|(a, b)| a != b)
+            .collect();
+        assert_eq!(demo.lines().count(), pretrained.lines().count());
+        assert_eq!(
+            differing[1..],
+            [
+                ("steps = 2000", "steps = 5000"),
+                (
+                    "lr_schedule = { warmup = 250, cosine = 2000, floor = 1e-5 }",
+                    "lr_schedule = { warmup = 250, cosine = 5000, floor = 1e-5 }"
+                )
+            ]
+        );
+        assert!(differing[0].0.starts_with("# mfm demo run"));
+    }
+}
