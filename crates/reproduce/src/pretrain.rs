@@ -86,7 +86,9 @@ pub fn pretrain_config() -> String {
     )
 }
 
-/// Arguments of `cargo xtask pretrain gmm`.
+/// Arguments of `cargo xtask pretrain gmm` (and `elephant`).
+// the field's doc is also its `--help` text, where `<model>` reads as meant
+#[allow(rustdoc::invalid_html_tags)]
 #[derive(clap::Args)]
 pub struct PretrainArgs {
     /// Scratch folder of the dataset and the run (default:
