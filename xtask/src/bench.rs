@@ -1,8 +1,8 @@
 //! `cargo xtask bench ...`: benchmarks that compare mfm with the Python
 //! reference stack in one run, on the same vertex and face arrays.
 
-use crate::pyenv::PyEnv;
 use anyhow::{Context, Result, bail};
+use mfm_reproduce::pyenv::PyEnv;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -31,9 +31,9 @@ pub fn operators(env: &PyEnv, mesh: &Path, levels: &str, runs: u32) -> Result<()
             mesh.display()
         );
     }
-    let dir = crate::target_dir().join("bench-operators");
+    let dir = mfm_reproduce::workspace::target_dir().join("bench-operators");
     std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let script = crate::root().join("xtask/python/bench_operators.py");
+    let script = mfm_reproduce::workspace::root().join("xtask/python/bench_operators.py");
     eprintln!(
         "xtask: timing libigl on {} (levels {levels})",
         mesh.display()
@@ -61,7 +61,7 @@ pub fn operators(env: &PyEnv, mesh: &Path, levels: &str, runs: u32) -> Result<()
     }
     eprintln!("xtask: timing mfm-geometry on the same arrays");
     let ours = capture(
-        crate::cargo(env)
+        mfm_reproduce::workspace::cargo(env)
             .args([
                 "run",
                 "--quiet",

@@ -9,12 +9,12 @@
 //! with the peak resident memory of the import process
 //! (`wait4`'s `ru_maxrss`) next to the size of the `signals.npy` it wrote.
 
-use crate::flow_steps::{arg, run_with_peak_memory};
-use crate::pyenv::PyEnv;
 use anyhow::{Result, bail};
+use mfm_reproduce::flow_steps::arg;
+use mfm_reproduce::mfm::{Mfm, run_with_peak_memory};
+use mfm_reproduce::pyenv::PyEnv;
 use std::io::Write as _;
 use std::path::Path;
-use std::process::Command;
 use std::time::Instant;
 
 /// Arguments of `bench import`.
@@ -40,7 +40,7 @@ pub fn import(env: &PyEnv, args: &ImportBenchArgs) -> Result<()> {
     if !matches!(args.format.as_str(), "ply" | "obj") {
         bail!("--format {}: expected ply or obj", args.format);
     }
-    let dir = crate::target_dir().join("bench-import");
+    let dir = mfm_reproduce::workspace::target_dir().join("bench-import");
     let inputs = dir.join(format!(
         "shapes-{}-{}-{}",
         args.shapes, args.vertices, args.format
@@ -59,7 +59,8 @@ pub fn import(env: &PyEnv, args: &ImportBenchArgs) -> Result<()> {
         std::fs::create_dir_all(&folder)?;
         write_inputs(&rest, args, &folder, &array)?;
     }
-    let exe = crate::demo::mfm_binary(env)?;
+    let mfm = Mfm::build(env);
+    mfm.exe()?;
     let output_bytes = 4 * args.shapes as u64 * v as u64 * 3;
     println!(
         "{} shapes x {v} vertices ({:.2} GB of float32 positions); idle machine assumed",
@@ -87,10 +88,8 @@ pub fn import(env: &PyEnv, args: &ImportBenchArgs) -> Result<()> {
         if out.exists() {
             std::fs::remove_dir_all(&out)?;
         }
-        let mut cmd = Command::new(&exe);
-        cmd.args(["dataset", "import"])
-            .args(&input)
-            .args(["--out", &arg(&out)]);
+        let mut cmd = mfm.command(&["dataset", "import"])?;
+        cmd.args(&input).args(["--out", &arg(&out)]);
         let t = Instant::now();
         cmd.stdout(std::process::Stdio::null())
             .stderr(std::process::Stdio::piped());

@@ -290,7 +290,7 @@ const METRICS: [Metric; 2] = [
 
 /// Where the table goes.
 pub fn output_dir() -> PathBuf {
-    crate::target_dir().join("bench-net")
+    mfm_reproduce::workspace::target_dir().join("bench-net")
 }
 
 #[cfg(test)]

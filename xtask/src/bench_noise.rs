@@ -4,7 +4,7 @@
 //!
 //! The Python peers are not part of the pinned test environment: they get
 //! their own virtual environment next to it in the cache folder
-//! (`<cache>/bench-peers-py<XY>-<pins>`, see [`crate::pyenv`]), created on
+//! (`<cache>/bench-peers-py<XY>-<pins>`, see [`mfm_reproduce::pyenv`]), created on
 //! the first run and reused afterwards (a marker file records a finished
 //! install; a lock file serializes concurrent installs). scikit-sparse
 //! 0.4.16 is built from source against the system SuiteSparse; when
@@ -18,8 +18,8 @@
 //! by other work on a shared machine); the raw JSON, with medians, is kept
 //! in `<target>/bench-noise/`.
 
-use crate::pyenv;
 use anyhow::{Context, Result, bail};
+use mfm_reproduce::pyenv;
 use serde_json::Value;
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -75,9 +75,9 @@ pub fn noise(opts: &NoiseBench) -> Result<()> {
         bail!("--tau must be a positive number, got {}", opts.tau);
     }
     let python = ensure_peers()?;
-    let dir = crate::target_dir().join("bench-noise");
+    let dir = mfm_reproduce::workspace::target_dir().join("bench-noise");
     fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let script = crate::root().join("xtask/python/bench_noise.py");
+    let script = mfm_reproduce::workspace::root().join("xtask/python/bench_noise.py");
     let (batch, tau, runs) = (
         opts.batch.to_string(),
         opts.tau.to_string(),
@@ -86,7 +86,7 @@ pub fn noise(opts: &NoiseBench) -> Result<()> {
     // the Rust example first: it is built (minutes on a cold cache) before
     // any timing starts, so the build does not overlap the Python timings
     eprintln!("xtask: building the mfm-noise sampling_timings example (release)");
-    crate::run(cargo().args([
+    mfm_reproduce::workspace::run(cargo().args([
         "build",
         "--quiet",
         "--release",
@@ -186,7 +186,7 @@ pub fn noise(opts: &NoiseBench) -> Result<()> {
 /// libtorch, so the pinned environment's variables are not needed.
 fn cargo() -> Command {
     let mut cmd = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned()));
-    cmd.current_dir(crate::root());
+    cmd.current_dir(mfm_reproduce::workspace::root());
     cmd
 }
 
@@ -324,7 +324,7 @@ fn cell(x: f64) -> String {
 
 /// The peers' environment folder, next to the pinned one.
 fn peers_dir() -> Result<PathBuf> {
-    let pinned = crate::pyenv::env_dir()?;
+    let pinned = mfm_reproduce::pyenv::env_dir()?;
     let cache = pinned.parent().unwrap_or(Path::new(".")).to_path_buf();
     let mut name = format!(
         "bench-peers-py{}",
@@ -376,7 +376,7 @@ fn install_peers(dir: &Path) -> Result<()> {
     );
     let python = dir.join("bin/python");
     if !python.exists() {
-        crate::run(
+        mfm_reproduce::workspace::run(
             Command::new(pyenv::base_python())
                 .args(["-m", "venv"])
                 .arg(dir),
@@ -385,7 +385,7 @@ fn install_peers(dir: &Path) -> Result<()> {
     let constraints = dir.join("build-constraints.txt");
     fs::write(&constraints, BUILD_CONSTRAINTS)
         .with_context(|| format!("cannot write {}", constraints.display()))?;
-    crate::run(
+    mfm_reproduce::workspace::run(
         Command::new(&python)
             .env("PIP_CONSTRAINT", &constraints)
             .args([
@@ -399,7 +399,7 @@ fn install_peers(dir: &Path) -> Result<()> {
             ])
             .args(PEERS.iter().map(|(req, _)| *req)),
     )?;
-    crate::run(
+    mfm_reproduce::workspace::run(
         Command::new(&python).args(["-c", "import sksparse.cholmod, cholespy, igl, scipy.sparse"]),
     )
     .context("the peers' environment was installed but does not import")?;
@@ -431,9 +431,9 @@ fn ensure_suitesparse() -> Result<()> {
     eprintln!(
         "xtask: {CHOLMOD_HEADER} is missing; running `apt-get update` and `apt-get install -y libsuitesparse-dev` (scikit-sparse builds against it)"
     );
-    crate::run(Command::new("apt-get").arg("update"))
+    mfm_reproduce::workspace::run(Command::new("apt-get").arg("update"))
         .context("apt-get update failed (SuiteSparse headers are needed; are you root?)")?;
-    crate::run(
+    mfm_reproduce::workspace::run(
         Command::new("apt-get")
             .args(["install", "-y", "libsuitesparse-dev"])
             .env("DEBIAN_FRONTEND", "noninteractive"),

@@ -7,22 +7,15 @@
 //!   without arguments also the `no-network` check.
 //! - `lint`: `cargo fmt --check` and `cargo clippy --all-targets -D warnings`.
 //! - `no-network`: `mfm` built without libtorch links none and runs.
-//! - `demo`: the main job on a built-in default.
 //! - `bench operators`: operator assembly times, ours and libigl's, in one run.
 //! - `bench noise`: Matérn sampling, ours against CHOLMOD and cholespy, in one run.
 //! - `bench net`: PoissonNet training steps and inference at the three presets, in
 //!   interleaved rounds (optionally against a baseline `mfm`), next to the reference times.
 //! - `bench import`: `mfm dataset import` of many shapes, seconds and peak
 //!   memory.
-//! - `reproduce-figures gmm`: the paper's GMM table at CPU scale (noise
-//!   kinds compared on a non-uniform test mesh).
-//! - `reproduce-figures deform`: the paper's deformation experiments at CPU
-//!   scale (noise ablation, generalization, resolutions, robustness).
-//! - `reproduce-figures spectral`: the paper's noise figures (per-frequency
-//!   statistics, spectrum, fixed vs normalized tau, noise on a non-uniform
-//!   triangulation) and the numbers behind them, from scratch.
-//! - `reproduce-figures own`: the own-data path (import, train, sample on a
-//!   finer mesh, evaluate without a generator) on folders of shapes.
+//! - `demo`, `pretrain`, `time-to-quality`, `reproduce-figures`: the
+//!   reproductions of [`mfm_reproduce`] (also its `mfm-reproduce` binary),
+//!   with the same arguments.
 //! - `mfm ARGS...`: build the release `mfm` with the project's libtorch and
 //!   run it.
 //! - `visual-check DIR`: PNG contact sheets of the PLY files under DIR,
@@ -32,25 +25,16 @@ mod bench;
 mod bench_import;
 mod bench_net;
 mod bench_noise;
-mod demo;
-mod figures;
-mod figures_arbitrary;
-mod figures_deform;
-mod figures_gmm;
-mod figures_own;
-mod figures_scale;
-mod flow_steps;
 mod no_network;
-mod pretrain;
-mod pyenv;
 mod python_package;
-mod time_to_quality;
 mod visual_check;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
+use mfm_reproduce::mfm::Mfm;
+use mfm_reproduce::pyenv;
+use mfm_reproduce::workspace::{cargo, root, run};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 #[derive(Parser)]
 #[command(name = "cargo xtask", about = "mfm project automation")]
@@ -89,18 +73,9 @@ enum Cmd {
     /// libtorch (ldd) and runs without it (run after `cargo xtask test`: only
     /// the cli crate compiles again).
     NoNetwork,
-    /// Run the demo: the main job on a built-in default mesh.
-    Demo {
-        /// Output folder.
-        #[arg(long, default_value = "out/demo")]
-        out: PathBuf,
-    },
     /// Benchmarks against the Python reference stack, in one run.
     #[command(subcommand)]
     Bench(BenchCmd),
-    /// Regenerate the paper's figures (PNGs plus the numbers behind them).
-    #[command(subcommand)]
-    ReproduceFigures(FiguresCmd),
     /// Build the release `mfm` binary with the project's libtorch and run it
     /// with the given arguments (e.g. `cargo xtask mfm -- net summary`), in
     /// the current folder.
@@ -109,56 +84,13 @@ enum Cmd {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
-    /// Train and install a pretrained model shipped in fixtures/pretrained.
-    #[command(subcommand)]
-    Pretrain(PretrainCmd),
-    /// Sample quality against training time: the demo's GMM experiment
-    /// trained per network size (and recipe variant) for a time budget,
-    /// sampled and evaluated at log-spaced checkpoints; resumable.
-    TimeToQuality(time_to_quality::TimeToQualityArgs),
+    /// The reproductions (mfm-reproduce): demo, pretrain, time-to-quality,
+    /// reproduce-figures.
+    #[command(flatten)]
+    Reproduce(mfm_reproduce::Command),
     /// Render the PLY files under DIR offscreen with pyvista into PNG contact
     /// sheets (one per folder; signals as colors, plain meshes shaded).
     VisualCheck(visual_check::VisualCheckArgs),
-}
-
-#[derive(Subcommand)]
-enum PretrainCmd {
-    /// The demo's GMM model on the built-in blob
-    /// (fixtures/pretrained/gmm-blob/), sampled first by `cargo xtask demo`.
-    Gmm(pretrain::PretrainArgs),
-    /// The shape model: ARAP poses of ../shared/meshes/elephant.obj with
-    /// smooth Matérn noise (fixtures/pretrained/elephant/), sampled by
-    /// `cargo xtask demo` on a fine refinement.
-    Elephant(pretrain::PretrainArgs),
-}
-
-#[derive(Subcommand)]
-enum FiguresCmd {
-    /// Noise figures of paper section 3: per-frequency statistics, spectrum,
-    /// fixed vs normalized tau, noise on a non-uniform triangulation.
-    Spectral(figures::SpectralArgs),
-    /// The paper's GMM table at CPU scale: matern vs white vs naive noise,
-    /// trained on a uniform mesh, evaluated on a non-uniform one.
-    Gmm(figures_gmm::GmmArgs),
-    /// The paper's deformation experiments at CPU scale: ARAP poses of a real
-    /// mesh, noise ablation table, generalization, generation across
-    /// resolutions, robustness to holes, partial meshes and edge flips.
-    Deform(figures_deform::DeformArgs),
-    /// The paper's arbitrary-source model at CPU scale: body shapes x
-    /// poses of a humanoid, the eigenvector predictor and the conditioned
-    /// flow, evaluated on unseen shapes of the template and of another
-    /// triangulation (and on another object).
-    Arbitrary(figures_arbitrary::ArbitraryArgs),
-    /// Your own shapes, the path of the README's "Train on your own
-    /// shapes": import a folder (default: the shared real sequences),
-    /// train, sample on a finer mesh, evaluate without a generator; a
-    /// report with pictures.
-    Own(figures_own::OwnArgs),
-    /// A shape model far beyond its training resolution: the shipped
-    /// elephant model on its training mesh and up to 5 rounds of midpoint
-    /// subdivision (3.07M faces), seconds per sample, peak memory and
-    /// pictures of the same samples at every level.
-    Scale(figures_scale::ScaleArgs),
 }
 
 #[derive(Subcommand)]
@@ -247,44 +179,6 @@ enum BenchCmd {
     Import(bench_import::ImportBenchArgs),
 }
 
-/// The workspace root (parent of this crate's folder).
-pub fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .parent()
-        .map(Path::to_path_buf)
-        .unwrap_or_else(|| PathBuf::from("."))
-}
-
-/// Cargo's target folder: `CARGO_TARGET_DIR` (relative to the workspace root)
-/// or `target/` in the workspace root.
-pub fn target_dir() -> PathBuf {
-    match std::env::var_os("CARGO_TARGET_DIR") {
-        Some(dir) => root().join(dir),
-        None => root().join("target"),
-    }
-}
-
-/// A `cargo` command in the workspace root with the environment applied.
-pub fn cargo(env: &pyenv::PyEnv) -> Command {
-    let mut cmd = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned()));
-    cmd.current_dir(root());
-    for (k, v) in env.cargo_env() {
-        cmd.env(k, v);
-    }
-    cmd
-}
-
-/// Runs a command, failing with its status.
-pub fn run(cmd: &mut Command) -> Result<()> {
-    let status = cmd
-        .status()
-        .with_context(|| format!("cannot run {cmd:?}"))?;
-    if !status.success() {
-        bail!("command failed ({status}): {cmd:?}");
-    }
-    Ok(())
-}
-
 fn main() -> Result<()> {
     let cli = Cli::parse();
     match cli.command {
@@ -338,22 +232,7 @@ fn main() -> Result<()> {
                 "--allow-dirty",
             ]))
         }
-        Cmd::Pretrain(PretrainCmd::Gmm(args)) => {
-            let env = pyenv::ensure()?;
-            pretrain::gmm(&env, &args)
-        }
-        Cmd::Pretrain(PretrainCmd::Elephant(args)) => {
-            let env = pyenv::ensure()?;
-            pretrain::elephant(&env, &args)
-        }
-        Cmd::TimeToQuality(args) => {
-            let env = pyenv::ensure()?;
-            time_to_quality::run(&env, &args)
-        }
-        Cmd::Demo { out } => {
-            let env = pyenv::ensure()?;
-            demo::run(&env, &out)
-        }
+        Cmd::Reproduce(command) => mfm_reproduce::run(command),
         Cmd::Bench(BenchCmd::Operators { mesh, levels, runs }) => {
             let env = pyenv::ensure()?;
             let mesh = if mesh.is_relative() {
@@ -416,7 +295,7 @@ fn main() -> Result<()> {
             baseline,
         }) => {
             let env = pyenv::ensure()?;
-            let exe = demo::mfm_binary(&env)?;
+            let exe = mfm_reproduce::mfm::build_release(&env)?;
             let mesh = if mesh.starts_with("builtin:") || Path::new(&mesh).is_absolute() {
                 mesh
             } else {
@@ -444,34 +323,13 @@ fn main() -> Result<()> {
             let env = pyenv::ensure()?;
             bench_import::import(&env, &args)
         }
-        Cmd::ReproduceFigures(FiguresCmd::Spectral(args)) => figures::spectral(&args),
-        Cmd::ReproduceFigures(FiguresCmd::Gmm(args)) => {
-            let env = pyenv::ensure()?;
-            figures_gmm::gmm(&env, &args)
-        }
-        Cmd::ReproduceFigures(FiguresCmd::Deform(args)) => {
-            let env = pyenv::ensure()?;
-            figures_deform::deform(&env, &args)
-        }
-        Cmd::ReproduceFigures(FiguresCmd::Arbitrary(args)) => {
-            let env = pyenv::ensure()?;
-            figures_arbitrary::arbitrary(&env, &args)
-        }
-        Cmd::ReproduceFigures(FiguresCmd::Scale(args)) => {
-            let env = pyenv::ensure()?;
-            figures_scale::scale(&env, &args)
-        }
-        Cmd::ReproduceFigures(FiguresCmd::Own(args)) => {
-            let env = pyenv::ensure()?;
-            figures_own::own(&env, &args)
-        }
         Cmd::Mfm { args } => {
             let env = pyenv::ensure()?;
-            let exe = demo::mfm_binary(&env)?;
-            let status = Command::new(&exe)
-                .args(&args)
+            let mfm = Mfm::build(&env);
+            let status = mfm
+                .command(&args)?
                 .status()
-                .with_context(|| format!("cannot run {}", exe.display()))?;
+                .context("cannot run the release mfm")?;
             std::process::exit(status.code().unwrap_or(1));
         }
         Cmd::VisualCheck(args) => {

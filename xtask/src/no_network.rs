@@ -11,7 +11,7 @@ use std::process::Command;
 /// returns its path.
 pub fn build() -> Result<std::path::PathBuf> {
     let mut build = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".to_owned()));
-    build.current_dir(crate::root()).args([
+    build.current_dir(mfm_reproduce::workspace::root()).args([
         "build",
         "--profile",
         "test",
@@ -24,8 +24,10 @@ pub fn build() -> Result<std::path::PathBuf> {
     build
         .env_remove("LIBTORCH")
         .env_remove("LIBTORCH_USE_PYTORCH");
-    crate::run(&mut build)?;
-    Ok(crate::target_dir().join("debug").join("mfm"))
+    mfm_reproduce::workspace::run(&mut build)?;
+    Ok(mfm_reproduce::workspace::target_dir()
+        .join("debug")
+        .join("mfm"))
 }
 
 /// Builds and checks the libtorch-free `mfm`.

@@ -18,15 +18,15 @@
 //! `cargo xtask bench python` times the wheel against the command line and
 //! the Python sparse Cholesky stack (`xtask/python/bench_python.py`).
 
-use crate::pyenv::PyEnv;
 use anyhow::{Context, Result, bail};
+use mfm_reproduce::pyenv::PyEnv;
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// The package's folder (its `pyproject.toml` and `Cargo.toml`).
 fn package_dir() -> PathBuf {
-    crate::root().join("crates/python")
+    mfm_reproduce::workspace::root().join("crates/python")
 }
 
 /// Builds the wheel with `profile` (`dev` or `release`) into `out` (emptied
@@ -41,7 +41,7 @@ pub fn build_wheel(env: &PyEnv, profile: &str, out: &Path) -> Result<PathBuf> {
         .parent()
         .map(|bin| bin.join("maturin"))
         .context("the environment's interpreter has no folder")?;
-    crate::run(
+    mfm_reproduce::workspace::run(
         Command::new(&maturin)
             .current_dir(package_dir())
             .args(["build", "--quiet", "--profile", profile, "--out"])
@@ -49,7 +49,7 @@ pub fn build_wheel(env: &PyEnv, profile: &str, out: &Path) -> Result<PathBuf> {
             // the wheel links no libtorch; keep cargo's view of the
             // environment the same as `cargo test`'s so that the shared
             // dependencies are not rebuilt
-            .env("CARGO_TARGET_DIR", crate::target_dir()),
+            .env("CARGO_TARGET_DIR", mfm_reproduce::workspace::target_dir()),
     )?;
     match wheels_in(out)?.as_slice() {
         [one] => Ok(one.clone()),
@@ -75,7 +75,7 @@ fn wheels_in(dir: &Path) -> Result<Vec<PathBuf>> {
 
 /// `cargo xtask wheel`: the release wheel in `target/wheels/`.
 pub fn wheel(env: &PyEnv) -> Result<()> {
-    let out = crate::target_dir().join("wheels");
+    let out = mfm_reproduce::workspace::target_dir().join("wheels");
     let wheel = build_wheel(env, "release", &out)?;
     let size = fs::metadata(&wheel).map(|m| m.len()).unwrap_or(0);
     println!(
@@ -90,7 +90,7 @@ pub fn wheel(env: &PyEnv) -> Result<()> {
 /// Builds the dev wheel and installs it into a folder of its own; returns
 /// the wheel and the folder to put on `PYTHONPATH`.
 fn install_for_tests(env: &PyEnv) -> Result<(PathBuf, PathBuf)> {
-    let base = crate::target_dir().join("python");
+    let base = mfm_reproduce::workspace::target_dir().join("python");
     let wheel = build_wheel(env, "dev", &base.join("wheel"))?;
     let site = install_into(&env.python, &wheel, &base.join("site"))?;
     Ok((wheel, site))
@@ -102,7 +102,7 @@ fn install_into(python: &Path, wheel: &Path, site: &Path) -> Result<PathBuf> {
     if site.exists() {
         fs::remove_dir_all(site).with_context(|| format!("cannot remove {}", site.display()))?;
     }
-    crate::run(
+    mfm_reproduce::workspace::run(
         Command::new(python)
             .args([
                 "-m",
@@ -124,7 +124,7 @@ pub fn check(env: &PyEnv, args: &[String]) -> Result<()> {
     println!("== the mfm Python package (pytest)");
     let cli = crate::no_network::build()?;
     let (wheel, site) = install_for_tests(env)?;
-    crate::run(
+    mfm_reproduce::workspace::run(
         Command::new(&env.python)
             .current_dir(package_dir().join("tests"))
             .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
@@ -143,17 +143,17 @@ pub fn check(env: &PyEnv, args: &[String]) -> Result<()> {
 /// environment, then noise on a mesh file from a script that sees neither
 /// the checkout, nor cargo, nor libtorch.
 fn fresh_venv(wheel: &Path) -> Result<()> {
-    let venv = crate::target_dir().join("python/fresh-venv");
+    let venv = mfm_reproduce::workspace::target_dir().join("python/fresh-venv");
     if venv.exists() {
         fs::remove_dir_all(&venv).with_context(|| format!("cannot remove {}", venv.display()))?;
     }
-    crate::run(
-        Command::new(crate::pyenv::base_python())
+    mfm_reproduce::workspace::run(
+        Command::new(mfm_reproduce::pyenv::base_python())
             .args(["-m", "venv"])
             .arg(&venv),
     )?;
     let python = venv.join("bin/python");
-    crate::run(
+    mfm_reproduce::workspace::run(
         Command::new(&python)
             .args([
                 "-m",
@@ -165,7 +165,7 @@ fn fresh_venv(wheel: &Path) -> Result<()> {
             .arg(wheel),
     )?;
     // an empty folder outside the checkout's source tree
-    let work = crate::target_dir().join("python/fresh-run");
+    let work = mfm_reproduce::workspace::target_dir().join("python/fresh-run");
     if work.exists() {
         fs::remove_dir_all(&work).with_context(|| format!("cannot remove {}", work.display()))?;
     }
@@ -230,11 +230,11 @@ pub fn bench(env: &PyEnv, opts: &PythonBench) -> Result<()> {
         bail!("--tau must be positive, --batch and --runs at least 1");
     }
     let peers = crate::bench_noise::ensure_peers()?;
-    let dir = crate::target_dir().join("bench-python");
+    let dir = mfm_reproduce::workspace::target_dir().join("bench-python");
     let wheel = build_wheel(env, "release", &dir.join("wheel"))?;
     let site = install_into(&peers, &wheel, &dir.join("site"))?;
-    let cli = crate::demo::mfm_binary(env)?;
-    let scripts = crate::root().join("xtask/python");
+    let cli = mfm_reproduce::mfm::build_release(env)?;
+    let scripts = mfm_reproduce::workspace::root().join("xtask/python");
     let path = std::env::join_paths([site.as_path(), scripts.as_path()])?;
     let out = Command::new(&peers)
         .arg(scripts.join("bench_python.py"))

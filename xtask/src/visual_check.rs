@@ -154,7 +154,7 @@ pub fn run(python: &Path, args: &VisualCheckArgs) -> Result<()> {
         .canonicalize()
         .with_context(|| format!("cannot open output folder {}", out.display()))?;
     let sheets = plan_sheets(&dir, &out, folders, args.per_sheet as usize);
-    let script = crate::root().join("xtask/python/visual_check.py");
+    let script = mfm_reproduce::workspace::root().join("xtask/python/visual_check.py");
     let pid = std::process::id();
     let job_path = std::env::temp_dir().join(format!("mfm-visual-check-{pid}-job.json"));
     let result_path = std::env::temp_dir().join(format!("mfm-visual-check-{pid}-result.json"));

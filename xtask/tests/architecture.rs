@@ -109,9 +109,6 @@ fn the_crate_table_matches_the_workspace() {
     let mut problems = Vec::new();
     for package in meta["packages"].as_array().unwrap() {
         let name = short(package["name"].as_str().unwrap());
-        if name == "xtask" {
-            continue;
-        }
         let Some(row) = rows.get(&name) else {
             problems.push(format!("{name}: no row"));
             continue;

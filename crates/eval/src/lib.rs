@@ -1,5 +1,6 @@
 #![doc = include_str!("../README.md")]
 
+pub mod arbitrary;
 pub mod evaluation;
 pub mod metrics;
 pub mod pictures;

@@ -8,6 +8,7 @@ pub mod lock;
 pub mod matrix_market;
 pub mod npy;
 pub mod owned;
+pub mod run_folder;
 pub mod space;
 pub mod text;
 pub mod undo;

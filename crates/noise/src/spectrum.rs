@@ -506,6 +506,21 @@ pub struct SpectrumRequest {
     pub keep: Vec<usize>,
 }
 
+/// A [`MeshSpectrum::measure_on`] result: the spectrum, the kept
+/// coefficients, and where the time went.
+#[derive(Debug, Clone)]
+pub struct Measured {
+    /// The spectrum.
+    pub spectrum: MeshSpectrum,
+    /// The coefficients of the requested frequencies.
+    pub kept: KeptCoefficients,
+    /// Seconds spent drawing the samples.
+    pub sample_seconds: f64,
+    /// Seconds spent projecting them on the eigenvectors, in the caller's
+    /// `each` and in the report.
+    pub analysis_seconds: f64,
+}
+
 impl MeshSpectrum {
     /// Streams one channel of samples of `sampler` (built from `ops`, the
     /// operators of the mesh named `name`, e.g. with
@@ -539,22 +554,72 @@ impl MeshSpectrum {
             });
         }
         let pairs = eigenpairs(&ops.laplacian, &ops.mass, request.k)?;
-        let theory = sampler.theory(&pairs)?;
-        let mut analyzer = SpectralAnalyzer::new(&pairs, &ops.mass)?.keep(&request.keep);
-        let (samples, seed) = (request.samples, request.seed);
-        crate::stream::for_each_chunk(
+        let measured = Self::measure_on(
+            name,
+            ops,
+            &pairs,
             sampler,
-            samples,
-            1,
-            seed,
+            request,
             crate::stream::CHUNK,
             |b, first| {
-                analyzer.add(b)?;
                 progress(first + b.samples());
                 Ok(())
             },
         )?;
+        Ok((measured.spectrum, measured.kept))
+    }
+
+    /// [`MeshSpectrum::measure`] on eigenpairs computed before (one
+    /// eigensolve shared by several kinds on one mesh), in chunks of
+    /// `chunk` samples (statistics summed per chunk depend on its size in
+    /// their last bits, see [`crate::stream`]); `each(batch, first)` sees
+    /// every chunk after the analyzer has, for statistics the report does
+    /// not hold. `request.k` must be the number of `pairs`.
+    ///
+    /// Cost: `O(samples (V k))`.
+    ///
+    /// # Errors
+    /// [`NoiseError::InvalidParameter`] for fewer than 2 samples or a `k`
+    /// other than the pairs'; sampler errors and those `each` returns.
+    #[allow(clippy::too_many_arguments)]
+    pub fn measure_on(
+        name: &str,
+        ops: &mfm_geometry::operators::Operators,
+        pairs: &Eigenpairs,
+        sampler: &NoiseSampler,
+        request: &SpectrumRequest,
+        chunk: usize,
+        mut each: impl FnMut(&NoiseBatch, usize) -> Result<()>,
+    ) -> Result<Measured> {
+        if request.samples < 2 || request.k != pairs.values.len() {
+            return Err(NoiseError::InvalidParameter {
+                name: "samples, k",
+                expected: "at least 2 samples and k = the number of eigenpairs",
+                found: format!(
+                    "{} samples, k = {} with {} eigenpairs",
+                    request.samples,
+                    request.k,
+                    pairs.values.len()
+                ),
+            });
+        }
+        let theory = sampler.theory(pairs)?;
+        let mut analyzer = SpectralAnalyzer::new(pairs, &ops.mass)?.keep(&request.keep);
+        let (samples, seed) = (request.samples, request.seed);
+        // the consumer times itself; the rest of the loop is sampling
+        let mut analysis_seconds = 0.0;
+        let start = std::time::Instant::now();
+        crate::stream::for_each_chunk(sampler, samples, 1, seed, chunk, |b, first| {
+            let t = std::time::Instant::now();
+            analyzer.add(b)?;
+            each(b, first)?;
+            analysis_seconds += t.elapsed().as_secs_f64();
+            Ok(())
+        })?;
+        let sample_seconds = start.elapsed().as_secs_f64() - analysis_seconds;
+        let t = std::time::Instant::now();
         let report = analyzer.report(Some(&theory))?;
+        analysis_seconds += t.elapsed().as_secs_f64();
         let kept = request
             .keep
             .iter()
@@ -562,11 +627,16 @@ impl MeshSpectrum {
             .collect();
         let spectrum = Self {
             mesh: name.to_owned(),
-            vertices: v,
+            vertices: ops.mass.len(),
             gamma: sampler.gamma(),
             report,
         };
-        Ok((spectrum, kept))
+        Ok(Measured {
+            spectrum,
+            kept,
+            sample_seconds,
+            analysis_seconds,
+        })
     }
 }
 

@@ -496,6 +496,49 @@ fn a_measured_spectrum_keeps_the_asked_coefficients_and_compares_meshes() {
 }
 
 #[test]
+fn a_spectrum_on_given_eigenpairs_is_the_measured_one_and_shows_every_chunk() {
+    let mesh = common::blob(2);
+    let ops = Operators::new(&mesh).unwrap();
+    let sampler =
+        NoiseSampler::from_operators(&ops.laplacian, &ops.mass, NoiseKind::Matern { tau: 10.0 })
+            .unwrap();
+    let request = spectrum::SpectrumRequest {
+        samples: 300,
+        k: 10,
+        seed: 5,
+        keep: vec![3],
+    };
+    let (measured, kept) =
+        spectrum::MeshSpectrum::measure("m", &ops, &sampler, &request, |_| {}).unwrap();
+    let pairs = spectrum::eigenpairs(&ops.laplacian, &ops.mass, 10).unwrap();
+    let mut seen = Vec::new();
+    let on = spectrum::MeshSpectrum::measure_on(
+        "m",
+        &ops,
+        &pairs,
+        &sampler,
+        &request,
+        mfm_noise::stream::CHUNK,
+        |batch, first| {
+            seen.push((first, batch.samples()));
+            Ok(())
+        },
+    )
+    .unwrap();
+    // the same chunks, so the same bits
+    assert_eq!(on.spectrum, measured);
+    assert_eq!(on.kept, kept);
+    assert_eq!(seen, vec![(0, 256), (256, 44)]);
+    assert!(on.sample_seconds >= 0.0 && on.analysis_seconds >= 0.0);
+    // k must be the pairs'
+    let other = spectrum::SpectrumRequest { k: 9, ..request };
+    let e =
+        spectrum::MeshSpectrum::measure_on("m", &ops, &pairs, &sampler, &other, 64, |_, _| Ok(()))
+            .unwrap_err();
+    assert!(matches!(e, NoiseError::InvalidParameter { .. }), "{e}");
+}
+
+#[test]
 fn tau_below_the_zero_tau_regularization_is_refused_by_name() {
     let mesh = mfm_geometry::procedural::icosphere(2);
     let ops = Operators::new(&mesh).unwrap();

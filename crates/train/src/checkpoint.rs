@@ -22,6 +22,13 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{Result, TrainError};
 
+// The plain-file side of a run folder lives in mfm-files (readers of run
+// folders need no libtorch); these are its names here.
+pub use mfm_files::run_folder::{
+    CheckpointInfo, CheckpointState, FileRecord, LogAccumulator, STATE_FILE, STATE_FORMAT,
+    checkpoint_dir, list_checkpoints,
+};
+
 /// Network weights (safetensors).
 pub const WEIGHTS_FILE: &str = "model.safetensors";
 /// Network configuration (JSON), written next to the weights.
@@ -33,71 +40,10 @@ pub const EMA_FILE: &str = "ema.safetensors";
 pub const OPTIMIZER_FILE: &str = "optimizer.safetensors";
 /// [`FinalModelRecord`] (JSON): checksums of the final model.
 pub const FINAL_RECORD_FILE: &str = "model.state.json";
-/// [`CheckpointState`] (JSON).
-pub const STATE_FILE: &str = "state.json";
 /// The training log (CSV) in the run folder.
 pub const LOG_FILE: &str = mfm_files::owned::RUN_LOG;
 /// The folder of checkpoints in the run folder.
 pub const CHECKPOINTS_DIR: &str = mfm_files::owned::RUN_CHECKPOINTS;
-/// Version of [`CheckpointState`]'s format.
-pub const STATE_FORMAT: u32 = 1;
-
-/// Size and CRC-32 (IEEE) of one file of a checkpoint.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct FileRecord {
-    /// Length in bytes.
-    pub bytes: u64,
-    /// CRC-32 of the contents.
-    pub crc32: u32,
-}
-
-/// Running sums of the current log interval (so a resumed run writes the
-/// same rows as an uninterrupted one).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct LogAccumulator {
-    /// Sum of the step losses since the last row.
-    pub loss_sum: f64,
-    /// Sum of the (unclipped) gradient norms since the last row.
-    pub grad_norm_sum: f64,
-    /// Number of steps since the last row.
-    pub count: u64,
-}
-
-/// `state.json` of a checkpoint.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct CheckpointState {
-    /// [`STATE_FORMAT`].
-    pub format: u32,
-    /// Optimizer steps completed (the next step to run).
-    pub step: u64,
-    /// The run's seed.
-    pub seed: u64,
-    /// How the run's randomness is derived: every random choice of step `s`
-    /// is a pure function of `(seed, s)`, so `step` is the whole generator
-    /// state; recorded for readers of the file.
-    pub rng: String,
-    /// Training seconds before this checkpoint (summed over resumed
-    /// sessions).
-    pub elapsed_seconds: f64,
-    /// The loss of the last step, if any.
-    pub last_loss: Option<f64>,
-    /// The current log interval's sums.
-    pub log: LogAccumulator,
-    /// Every other file of the checkpoint, by name.
-    pub files: BTreeMap<String, FileRecord>,
-}
-
-/// A checkpoint folder found in a run folder.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct CheckpointInfo {
-    /// Steps completed.
-    pub step: u64,
-    /// The folder.
-    pub dir: PathBuf,
-}
 
 /// Writes `bytes` to `path` with [`mfm_files::write_atomic`]: a temporary
 /// file in the same folder, synced, renamed over `path`; removed on failure.
@@ -121,47 +67,6 @@ pub fn file_record(path: &Path) -> Result<FileRecord> {
         bytes: bytes.len() as u64,
         crc32: h.finalize(),
     })
-}
-
-/// The folder of the checkpoint after `step` steps.
-pub fn checkpoint_dir(run_dir: &Path, step: u64) -> PathBuf {
-    run_dir
-        .join(CHECKPOINTS_DIR)
-        .join(format!("step-{step:09}"))
-}
-
-/// The checkpoint folders of a run (`checkpoints/step-N`), ascending in
-/// step; temporary folders are skipped. No folder: an empty list.
-///
-/// # Errors
-/// [`TrainError::Files`] (`Io`) if the folder cannot be listed.
-pub fn list_checkpoints(run_dir: &Path) -> Result<Vec<CheckpointInfo>> {
-    let root = run_dir.join(CHECKPOINTS_DIR);
-    let entries = match std::fs::read_dir(&root) {
-        Ok(e) => e,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(e) => return Err(TrainError::io(&root, e)),
-    };
-    let mut out = Vec::new();
-    for entry in entries {
-        let entry = entry.map_err(|e| TrainError::io(&root, e))?;
-        let name = entry.file_name();
-        let Some(step) = name
-            .to_str()
-            .and_then(|n| n.strip_prefix("step-"))
-            .and_then(|n| n.parse::<u64>().ok())
-        else {
-            continue;
-        };
-        if entry.path().is_dir() {
-            out.push(CheckpointInfo {
-                step,
-                dir: entry.path(),
-            });
-        }
-    }
-    out.sort_by_key(|c| c.step);
-    Ok(out)
 }
 
 /// Removes temporary folders left in `checkpoints/` by interrupted writes.

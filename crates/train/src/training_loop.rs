@@ -47,8 +47,9 @@ use crate::error::{Result, TrainError};
 use crate::schedule::LrSchedule;
 use crate::seeding::INIT_LOCK;
 
-/// Header of the training log.
-pub const LOG_HEADER: &str = "step,loss,lr,grad_norm,seconds";
+/// Header of the training log (defined with the rest of the run folder's
+/// plain files in `mfm_files::run_folder`).
+pub use mfm_files::run_folder::LOG_HEADER;
 
 /// How the loop optimizes, logs and checkpoints: one configuration for
 /// every training (each run description maps its own fields onto it).

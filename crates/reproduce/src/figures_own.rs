@@ -20,8 +20,10 @@
 //! Drives the release `mfm` binary. Writes `report.md`, `report.json` and
 //! each sequence's folders under `--out`.
 
-use crate::flow_steps::{Mfm, arg, fresh_dir, out_dir};
-use crate::pyenv::PyEnv;
+use crate::flow_steps::{arg, fresh_dir};
+use crate::mfm::Mfm;
+use crate::reports;
+use crate::workspace::{self, in_root};
 use anyhow::{Context, Result, bail};
 use mfm_data::import::ImportSummary;
 use mfm_eval::evaluation::EvalReport;
@@ -73,12 +75,15 @@ struct Row {
 }
 
 /// Runs the command (see the [module docs](self)).
-pub fn own(env: &PyEnv, args: &OwnArgs) -> Result<()> {
-    let out = out_dir(&args.out);
-    let mut data = args.data.iter().map(|d| out_dir(d)).collect::<Vec<_>>();
+///
+/// # Errors
+/// When a data folder is neither kind, or a step fails.
+pub fn own(mfm: &Mfm, args: &OwnArgs) -> Result<()> {
+    let out = in_root(&args.out);
+    let mut data = args.data.iter().map(|d| in_root(d)).collect::<Vec<_>>();
     fresh_dir(&out)?;
     if data.is_empty() {
-        let shared = crate::root().join("../shared/data");
+        let shared = workspace::root().join("../shared/data");
         for name in ["horse-gallop", "crane"] {
             if shared.join(name).join("frames.npy").is_file() {
                 data.push(shared.join(name));
@@ -91,12 +96,11 @@ pub fn own(env: &PyEnv, args: &OwnArgs) -> Result<()> {
             data.push(dir);
         }
     }
-    let exe = crate::demo::mfm_binary(env)?;
-    let mfm = Mfm { exe: &exe };
+    mfm.exe()?;
     let start = Instant::now();
     let mut rows = Vec::new();
     for dir in &data {
-        rows.push(run_one(&mfm, args, dir, &out)?);
+        rows.push(run_one(mfm, args, dir, &out)?);
     }
     let report = write_report(args, &rows, start.elapsed().as_secs_f64());
     std::fs::write(out.join("report.md"), &report)
@@ -123,7 +127,7 @@ pub fn own(env: &PyEnv, args: &OwnArgs) -> Result<()> {
 }
 
 /// Import, train, sample and evaluate the data folder `dir`.
-fn run_one(mfm: &Mfm<'_>, args: &OwnArgs, dir: &Path, out: &Path) -> Result<Row> {
+fn run_one(mfm: &Mfm, args: &OwnArgs, dir: &Path, out: &Path) -> Result<Row> {
     let name = dir
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
@@ -151,15 +155,13 @@ fn run_one(mfm: &Mfm<'_>, args: &OwnArgs, dir: &Path, out: &Path) -> Result<Row>
     import.extend(["--holdout".into(), holdout, "--seed".into(), seed.clone()]);
     import.extend(["--align".into(), args.align.clone()]);
     import.extend(["--out".into(), arg(&data)]);
-    mfm.run(&import.iter().map(String::as_str).collect::<Vec<_>>())?;
-    let summary: ImportSummary = serde_json::from_value(crate::flow_steps::read_json(
-        &data.join(mfm_data::import::SUMMARY),
-    )?)?;
+    mfm.run(&import)?;
+    let summary: ImportSummary = reports::read(&data.join(mfm_data::import::SUMMARY))?;
 
     let run = base.join("run");
     let mut train = vec!["train".to_owned()];
     match &args.config {
-        Some(c) => train.extend(["--config".into(), arg(&out_dir(c))]),
+        Some(c) => train.extend(["--config".into(), arg(&in_root(c))]),
         None => train.extend(["--preset".into(), args.preset.clone()]),
     }
     train.extend([
@@ -173,7 +175,7 @@ fn run_one(mfm: &Mfm<'_>, args: &OwnArgs, dir: &Path, out: &Path) -> Result<Row>
         train.extend(["--steps".into(), s.to_string()]);
     }
     let t = Instant::now();
-    mfm.run(&train.iter().map(String::as_str).collect::<Vec<_>>())?;
+    mfm.run(&train)?;
     let train_seconds = t.elapsed().as_secs_f64();
 
     let samples = base.join("samples");
@@ -187,18 +189,12 @@ fn run_one(mfm: &Mfm<'_>, args: &OwnArgs, dir: &Path, out: &Path) -> Result<Row>
         &["--ply", "4"],
     )?;
     let sample_seconds = t.elapsed().as_secs_f64();
-    let metrics = mfm.eval(
+    let report: EvalReport = mfm.eval(
         &samples.join("samples.npy"),
         &["--reference", &arg(&data)],
         &base.join("eval.json"),
         Some(&base.join("samples_beside_nearest.png")),
     )?;
-    let report: EvalReport = serde_json::from_value(metrics).with_context(|| {
-        format!(
-            "{}: not an mfm eval report",
-            base.join("eval.json").display()
-        )
-    })?;
     Ok(Row {
         name,
         import: summary,

@@ -15,8 +15,10 @@
 //! `table.json`, and per kind the run folder, the samples and
 //! `means_KIND.png` (point-wise mean, generated vs reference).
 
-use crate::flow_steps::{Comparison, Mfm, Quality, arg, fresh_dir, mesh_or_shared, num, out_dir};
-use crate::pyenv::PyEnv;
+use crate::flow_steps::{Comparison, Quality, arg, fresh_dir, mesh_or_shared, quartiles};
+use crate::mfm::Mfm;
+use crate::reports::EvalOutcome;
+use crate::workspace::in_root;
 use anyhow::Result;
 use serde_json::Value;
 use std::fmt::Write as _;
@@ -54,11 +56,13 @@ pub struct GmmArgs {
 }
 
 /// Runs the experiment.
-pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
-    let out = out_dir(&args.out);
+///
+/// # Errors
+/// When a step fails (a kind whose sampling fails is a row of the table).
+pub fn gmm(mfm: &Mfm, args: &GmmArgs) -> Result<()> {
+    let out = in_root(&args.out);
     let mesh = mesh_or_shared(args.mesh.as_deref(), "bunny.off", "builtin:blob");
-    let exe = crate::demo::mfm_binary(env)?;
-    let mfm = Mfm { exe: &exe };
+    mfm.exe()?;
     let start = Instant::now();
     fresh_dir(&out)?;
     let data = out.join("data");
@@ -109,8 +113,8 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
     );
     let mut floor = None;
     for r in &rows {
-        let (kind, m, tr, sa) = (&r.kind, &r.metrics, r.train_seconds, r.sample_seconds);
-        if r.failed() {
+        let (kind, tr, sa) = (&r.kind, r.train_seconds, r.sample_seconds);
+        let EvalOutcome::Report(m) = &r.metrics else {
             // mfm's own message is in the log above and in table.json
             writeln!(
                 md,
@@ -118,10 +122,17 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
             )?;
             writeln!(csv, "{kind},,,,,,,,,,,,{tr:.1},{sa:.2}")?;
             continue;
-        }
-        let q = Quality::of(m);
-        floor.get_or_insert_with(|| Quality::reference_of(m));
-        let [err, mmd, cov, nna] = ["test_error", "mmd", "cov", "one_nna"].map(|k| num(m, k));
+        };
+        let section = Quality::section(m)?;
+        let q = Quality::of(section);
+        floor.get_or_insert_with(|| section.reference.clone());
+        let metrics = &m.metrics;
+        let [err, mmd, cov, nna] = [
+            metrics.test_error,
+            metrics.mmd,
+            metrics.cov,
+            metrics.one_nna,
+        ];
         writeln!(
             md,
             "| {kind} | {} | {err:.4} | {mmd:.4} | {cov:.3} | {nna:.3} | {tr:.0} | {sa:.1} |",
@@ -134,10 +145,11 @@ pub fn gmm(env: &PyEnv, args: &GmmArgs) -> Result<()> {
         )?;
     }
     if let Some(d) = floor {
+        let residual = quartiles(d.residual);
         writeln!(
             md,
             "| reference set (the floor) | {:.3} [{:.3}, {:.3}] | {:.2} | {:.2} | | 1 | | | | | | |",
-            d.residual[1], d.residual[0], d.residual[2], d.peak[1], d.bumps
+            residual[1], residual[0], residual[2], d.peak.median, d.bumps_above_half
         )?;
     }
     writeln!(

@@ -14,8 +14,10 @@
 //! Measure on an otherwise idle machine: libtorch's workers slow down
 //! several times beside another busy process.
 
-use crate::flow_steps::{arg, fresh_dir, out_dir, run_with_peak_memory};
-use crate::pyenv::PyEnv;
+use crate::flow_steps::{arg, fresh_dir};
+use crate::mfm::Mfm;
+use crate::reports::SampleTiming;
+use crate::workspace::{self, in_root};
 use anyhow::{Context, Result, bail};
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -52,15 +54,18 @@ struct Level {
 }
 
 /// Runs the command (see the [module docs](self)).
-pub fn scale(env: &PyEnv, args: &ScaleArgs) -> Result<()> {
-    let out = out_dir(&args.out);
+///
+/// # Errors
+/// When the model or its mesh is not there, or a step fails.
+pub fn scale(mfm: &Mfm, args: &ScaleArgs) -> Result<()> {
+    let out = in_root(&args.out);
     fresh_dir(&out)?;
-    let exe = crate::demo::mfm_binary(env)?;
+    mfm.exe()?;
     let (run, coarse) = match (&args.run, &args.mesh) {
-        (Some(run), Some(mesh)) => (out_dir(run), out_dir(mesh)),
+        (Some(run), Some(mesh)) => (in_root(run), in_root(mesh)),
         _ => {
             let run = crate::pretrain::shipped_at(crate::pretrain::ELEPHANT_DIR, "elephant")?;
-            let mesh = crate::root().join(crate::pretrain::ELEPHANT_MESH);
+            let mesh = workspace::root().join(crate::pretrain::ELEPHANT_MESH);
             if !mesh.is_file() {
                 bail!(
                     "{} not found: the shipped shape model's training mesh is made from the \
@@ -69,21 +74,18 @@ pub fn scale(env: &PyEnv, args: &ScaleArgs) -> Result<()> {
                 );
             }
             let data = out.join("data");
-            crate::demo::mfm_live(
-                &exe,
-                &[
-                    "dataset",
-                    "deform",
-                    "--mesh",
-                    &arg(&mesh),
-                    "--n",
-                    "2",
-                    "--reference",
-                    "1",
-                    "--out",
-                    &arg(&data),
-                ],
-            )?;
+            mfm.run(&[
+                "dataset",
+                "deform",
+                "--mesh",
+                &arg(&mesh),
+                "--n",
+                "2",
+                "--reference",
+                "1",
+                "--out",
+                &arg(&data),
+            ])?;
             (run, data.join("coarse.ply"))
         }
     };
@@ -96,21 +98,18 @@ pub fn scale(env: &PyEnv, args: &ScaleArgs) -> Result<()> {
             coarse.clone()
         } else {
             let fine = out.join(format!("mesh_{level}.ply"));
-            crate::demo::mfm_live(
-                &exe,
-                &[
-                    "remesh",
-                    &arg(&coarse),
-                    "--subdivide",
-                    &level.to_string(),
-                    "--out",
-                    &arg(&fine),
-                ],
-            )?;
+            mfm.run(&[
+                "remesh",
+                &arg(&coarse),
+                "--subdivide",
+                &level.to_string(),
+                "--out",
+                &arg(&fine),
+            ])?;
             fine
         };
         let samples = out.join(format!("samples_{level}"));
-        let call: Vec<String> = [
+        let peak_bytes = mfm.run_with_peak_memory(&[
             "sample",
             "--run",
             &arg(&run),
@@ -124,15 +123,9 @@ pub fn scale(env: &PyEnv, args: &ScaleArgs) -> Result<()> {
             "0",
             "--out",
             &arg(&samples),
-        ]
-        .iter()
-        .map(|s| (*s).to_owned())
-        .collect();
-        println!("$ mfm {}", call.join(" "));
-        let peak_bytes = run_with_peak_memory(std::process::Command::new(&exe).args(&call))?;
-        let timing = crate::flow_steps::read_json(&samples.join("timing.json"))?;
-        let vertices = timing["vertices"].as_u64().unwrap_or(0);
-        let seconds_per_sample = timing["seconds_per_sample"].as_f64().unwrap_or(f64::NAN);
+        ])?;
+        let timing = SampleTiming::of(&samples)?;
+        let (vertices, seconds_per_sample) = (timing.vertices as u64, timing.seconds_per_sample);
         // midpoint subdivision multiplies the faces by 4 per round
         let faces = coarse_faces << (2 * level);
         println!(

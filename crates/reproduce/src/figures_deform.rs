@@ -24,10 +24,10 @@
 //! Drives the release `mfm` binary (the xtask does not link libtorch).
 //! Writes `table.md`, `table.json`, and the folders and PNGs of every step.
 
-use crate::flow_steps::{
-    Comparison, KindResult, Mfm, arg, fresh_dir, mesh_or_shared, num, out_dir, read_json, tag,
-};
-use crate::pyenv::PyEnv;
+use crate::flow_steps::{Comparison, KindResult, arg, fresh_dir, mesh_or_shared, tag};
+use crate::mfm::Mfm;
+use crate::reports::{EvalOutcome, EvalReport, PlausibilityReport, SampleTiming};
+use crate::workspace::in_root;
 use anyhow::{Context, Result};
 use serde_json::Value;
 use std::fmt::Write as _;
@@ -82,31 +82,13 @@ pub struct DeformArgs {
 /// Number of parameters in a safetensors file (from its header).
 fn parameter_count(path: &Path) -> Result<u64> {
     let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let len = bytes
-        .get(..8)
-        .and_then(|b| b.try_into().ok())
-        .map(u64::from_le_bytes)
-        .with_context(|| format!("{}: too short for safetensors", path.display()))?;
-    let header = usize::try_from(len)
-        .ok()
-        .and_then(|l| bytes.get(8..8 + l))
-        .with_context(|| format!("{}: truncated safetensors header", path.display()))?;
-    let header: Value = serde_json::from_slice(header)
-        .with_context(|| format!("{}: invalid safetensors header", path.display()))?;
-    let mut total = 0;
-    for (name, t) in header.as_object().into_iter().flatten() {
-        if name == "__metadata__" {
-            continue;
-        }
-        let shape = t["shape"]
-            .as_array()
-            .with_context(|| format!("{}: tensor {name} has no shape", path.display()))?;
-        total += shape
-            .iter()
-            .map(|d| d.as_u64().unwrap_or(0))
-            .product::<u64>();
-    }
-    Ok(total)
+    let (_, metadata) = safetensors::SafeTensors::read_metadata(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: not a safetensors file: {e:?}", path.display()))?;
+    Ok(metadata
+        .tensors()
+        .values()
+        .map(|t| t.shape.iter().product::<usize>() as u64)
+        .sum())
 }
 
 /// One row of the ablation table.
@@ -116,12 +98,14 @@ struct AblationRow {
 }
 
 /// Runs the experiment.
-pub fn deform(env: &PyEnv, args: &DeformArgs) -> Result<()> {
+///
+/// # Errors
+/// When a step fails (a kind whose sampling fails is a row of the table).
+pub fn deform(mfm: &Mfm, args: &DeformArgs) -> Result<()> {
     anyhow::ensure!(!args.kinds.is_empty(), "--kinds is empty");
-    let out = out_dir(&args.out);
+    let out = in_root(&args.out);
     let mesh = mesh_or_shared(args.mesh.as_deref(), "elephant.obj", "builtin:capsule");
-    let exe = crate::demo::mfm_binary(env)?;
-    let mfm = Mfm { exe: &exe };
+    mfm.exe()?;
     let start = Instant::now();
     fresh_dir(&out)?;
     let data = out.join("data");
@@ -176,8 +160,9 @@ pub fn deform(env: &PyEnv, args: &DeformArgs) -> Result<()> {
         &[],
     )?;
     let nearest = |samples: &Path, name: &str| -> Result<f64> {
-        let m = mfm.eval(samples, &["--reference", &train_dir], &out.join(name), None)?;
-        Ok(num(&m, "mmd"))
+        let m: EvalReport =
+            mfm.eval(samples, &["--reference", &train_dir], &out.join(name), None)?;
+        Ok(m.metrics.mmd)
     };
     let generalization = (
         nearest(
@@ -202,8 +187,9 @@ pub fn deform(env: &PyEnv, args: &DeformArgs) -> Result<()> {
         md,
         "| noise | projection MSE x 1e4 median [q1, q3] (mean) | rotation spread / data's | translation spread / data's | MMD | COV | 1-NNA | # params | train s | sample s |\n|---|---|---|---|---|---|---|---|---|---|"
     )?;
+    let mut floor = None;
     for AblationRow { result: r, params } in &rows {
-        if r.failed() {
+        let EvalOutcome::Report(m) = &r.metrics else {
             // mfm's own message is in the log above and in table.json
             writeln!(
                 md,
@@ -211,32 +197,33 @@ pub fn deform(env: &PyEnv, args: &DeformArgs) -> Result<()> {
                 r.kind, params, r.train_seconds, r.sample_seconds
             )?;
             continue;
-        }
-        let q = &r.metrics["projection_mse_quartiles"];
-        let ratio = &r.metrics["spread_ratio"];
+        };
+        let shapes = shape_report(m, &r.kind)?;
+        let (q, ratio) = (shapes.projection_mse_quartiles, shapes.spread_ratio);
+        floor.get_or_insert(shapes.reference_projection_mse);
         writeln!(
             md,
             "| {} | {:.2} [{:.2}, {:.2}] ({:.2}) | {:.2} | {:.2} | {:.4} | {:.3} | {:.3} | {} | {:.0} | {:.1} |",
             r.kind,
-            num(q, "median") * 1e4,
-            num(q, "q1") * 1e4,
-            num(q, "q3") * 1e4,
-            num(&r.metrics, "projection_mse") * 1e4,
-            num(ratio, "rotation"),
-            num(ratio, "translation"),
-            num(&r.metrics, "mmd"),
-            num(&r.metrics, "cov"),
-            num(&r.metrics, "one_nna"),
+            q.median * 1e4,
+            q.q1 * 1e4,
+            q.q3 * 1e4,
+            shapes.projection_mse * 1e4,
+            ratio.rotation,
+            ratio.translation,
+            m.metrics.mmd,
+            m.metrics.cov,
+            m.metrics.one_nna,
             params,
             r.train_seconds,
             r.sample_seconds
         )?;
     }
-    if let Some(r) = rows.first() {
+    if let Some(floor) = floor {
         writeln!(
             md,
             "\nHeld-out reference shapes themselves project with MSE x 1e4 = {:.4} (the floor of the metric).",
-            num(&r.result.metrics, "reference_projection_mse") * 1e4
+            floor * 1e4
         )?;
     }
     writeln!(
@@ -260,10 +247,10 @@ from a held-out shape to its nearest training shape {:.4} (both on the training 
     });
 
     if !args.ablation_only {
-        let (res_md, res_json) = resolutions(&mfm, args, &data, &space, &main_run, &out)?;
+        let (res_md, res_json) = resolutions(mfm, args, &data, &space, &main_run, &out)?;
         md.push_str(&res_md);
         json["resolutions"] = res_json;
-        let (rob_md, rob_json) = robustness(&mfm, args, &data, &space, &main_run, &out)?;
+        let (rob_md, rob_json) = robustness(mfm, args, &data, &space, &main_run, &out)?;
         md.push_str(&rob_md);
         json["robustness"] = rob_json;
     }
@@ -283,7 +270,7 @@ from a held-out shape to its nearest training shape {:.4} (both on the training 
 /// them with the projection metric; returns (seconds per sample, projection
 /// MSE, vertices).
 fn sample_and_project(
-    mfm: &Mfm<'_>,
+    mfm: &Mfm,
     args: &DeformArgs,
     run: &Path,
     mesh: &Path,
@@ -291,24 +278,36 @@ fn sample_and_project(
     dir: &Path,
 ) -> Result<(f64, f64, u64)> {
     mfm.sample(run, mesh, args.per_mesh, args.seed, dir, &["--ply", "1"])?;
-    let m = mfm.eval(
+    let m: PlausibilityReport = mfm.eval(
         &dir.join("samples.npy"),
         &["--space", &arg(space), "--mesh", &arg(mesh)],
         &dir.join("projection.json"),
         Some(&dir.join("projections.png")),
     )?;
-    let timing = read_json(&dir.join("timing.json"))?;
+    let timing = SampleTiming::of(dir)?;
     Ok((
-        num(&timing, "seconds_per_sample"),
-        num(&m, "projection_mse"),
-        timing["vertices"].as_u64().unwrap_or(0),
+        timing.seconds_per_sample,
+        m.projection_mse,
+        timing.vertices as u64,
     ))
+}
+
+/// The projection part of a kind's evaluation.
+fn shape_report<'a>(
+    m: &'a EvalReport,
+    kind: &str,
+) -> Result<&'a mfm_eval::evaluation::ShapeReport> {
+    m.shapes.as_ref().with_context(|| {
+        format!(
+            "{kind}: the evaluation has no projection (mfm eval on a deformation set writes one)"
+        )
+    })
 }
 
 /// Generation on the coarse mesh, its 4x and 16x refinements, the original
 /// and the original refined 16x.
 fn resolutions(
-    mfm: &Mfm<'_>,
+    mfm: &Mfm,
     args: &DeformArgs,
     data: &Path,
     space: &Path,
@@ -370,7 +369,7 @@ fn resolutions(
 
 /// The main model on damaged evaluation meshes.
 fn robustness(
-    mfm: &Mfm<'_>,
+    mfm: &Mfm,
     args: &DeformArgs,
     data: &Path,
     space: &Path,
@@ -456,4 +455,35 @@ fn side_by_side(meshes: &[(String, PathBuf)], path: &Path) -> Result<()> {
     let img = render_grid(&panels, panels.len().min(4), &opts)?;
     save_png(&img, path)?;
     Ok(())
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use safetensors::tensor::{Dtype, TensorView};
+
+    #[test]
+    fn parameters_are_counted_from_the_header() {
+        let (a, b) = (vec![0u8; 4 * 6], vec![0u8; 8 * 5]);
+        let tensors = [
+            (
+                "a.weight",
+                TensorView::new(Dtype::F32, vec![2, 3], &a).unwrap(),
+            ),
+            ("b", TensorView::new(Dtype::F64, vec![5], &b).unwrap()),
+        ];
+        let metadata = Some(std::collections::HashMap::from([(
+            "format".to_owned(),
+            "pt".to_owned(),
+        )]));
+        let bytes = safetensors::serialize(tensors, &metadata).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("model.safetensors");
+        std::fs::write(&path, &bytes).unwrap();
+        assert_eq!(parameter_count(&path).unwrap(), 11);
+        std::fs::write(&path, &bytes[..12]).unwrap();
+        let e = parameter_count(&path).unwrap_err().to_string();
+        assert!(e.contains("model.safetensors"), "{e}");
+    }
 }

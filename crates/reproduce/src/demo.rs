@@ -19,12 +19,14 @@
 //! (the section says why it was skipped otherwise). Writes a Markdown report
 //! linking everything.
 
+use crate::flow_steps::{Quality, quartiles};
+use crate::mfm::Mfm;
 use crate::pretrain::{ELEPHANT_DIR, ELEPHANT_MESH, PRETRAINED_DIR};
-use crate::pyenv::PyEnv;
+use crate::reports::{self, EvalReport, SampleTiming};
+use crate::workspace::{self, in_root};
 use anyhow::{Context, Result};
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 
 /// The built-in training mesh (the GMM experiment's default surface).
 const DEMO_MESH: &str = "builtin:blob";
@@ -35,69 +37,27 @@ const DEMO_PRESET: &str = "pretrained model's";
 /// Training steps of the demo.
 const DEMO_STEPS: u64 = 2000;
 
-/// The demo's run configuration: the pretrained model's recipe (PoissonNet
-/// W32 K3 nl3; canonical frame, sigma 3, centred noise and targets, 20
-/// midpoint steps; the official loss; sampling with the weight average; a
-/// 250-step warm-up to 4e-3 and a cosine decay to the last step;
-/// logit-normal path times) trained 2000 steps instead of 5000: a few
-/// minutes on two cores.
+/// The demo's run configuration: the pretrained model's recipe
+/// ([`crate::pretrain::gmm_config`]: PoissonNet W32 K3 nl3; canonical
+/// frame, sigma 3, centred noise and targets, 20 midpoint steps; the
+/// official loss; sampling with the weight average; a 250-step warm-up to
+/// 4e-3 and a cosine decay to the last step; logit-normal path times)
+/// trained 2000 steps instead of 5000: a few minutes on two cores.
 /// docs/BENCHMARKS.md ("Time to quality") has the whole curve and the
 /// controlled runs that chose the schedule.
-const DEMO_CONFIG: &str = "\
-# mfm demo run: `mfm train --config run.toml` (every other field has its default)
-[model]
-preset = \"small\"
-width = 32
-blocks = 3
-vector_layers = 3
-
-[train]
-steps = 2000
-batch = 4
-lr = 4e-3
-lr_schedule = { warmup = 250, cosine = 2000, floor = 1e-5 }
-ema = 0.999
-time = \"logit-normal\"
-checkpoint_every = 500
-log_every = 100
-";
-
-/// Builds the release `mfm` binary with the project environment and returns
-/// its path.
-pub(crate) fn mfm_binary(env: &PyEnv) -> Result<PathBuf> {
-    crate::run(crate::cargo(env).args(["build", "--release", "--quiet", "-p", "mfm-cli"]))?;
-    let exe = crate::target_dir().join("release/mfm");
-    anyhow::ensure!(exe.is_file(), "built mfm not found at {}", exe.display());
-    Ok(exe)
-}
-
-/// Runs `mfm` with the terminal attached (progress bars stay live).
-pub(crate) fn mfm_live(exe: &Path, args: &[&str]) -> Result<()> {
-    crate::run(Command::new(exe).args(args))
-}
-
-fn mfm(exe: &Path, args: &[&str]) -> Result<String> {
-    let out = Command::new(exe)
-        .args(args)
-        .output()
-        .with_context(|| format!("cannot run {}", exe.display()))?;
-    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    print!("{stdout}");
-    eprint!("{}", String::from_utf8_lossy(&out.stderr));
-    anyhow::ensure!(
-        out.status.success(),
-        "mfm {} failed ({})",
-        args.join(" "),
-        out.status
-    );
-    Ok(stdout)
+pub fn demo_config() -> String {
+    crate::pretrain::gmm_config(
+        "mfm demo run: `mfm train --config run.toml` (every other field has its default)",
+        DEMO_STEPS,
+        None,
+    )
 }
 
 /// `mfm sample` of 64 samples (seed 7) of `run` on `mesh` into `samples`,
 /// then `mfm eval` against `reference` into `metrics` with the pictures at
 /// `png`; returns both commands' outputs.
 fn sample_and_eval(
-    exe: &Path,
+    mfm: &Mfm,
     run: &Path,
     mesh: &Path,
     reference: &Path,
@@ -106,48 +66,42 @@ fn sample_and_eval(
     png: &Path,
 ) -> Result<(String, String)> {
     let s = |p: &Path| p.to_string_lossy().into_owned();
-    let sampled = mfm(
-        exe,
-        &[
-            "sample",
-            "--run",
-            &s(run),
-            "--mesh",
-            &s(mesh),
-            "--n",
-            "64",
-            "--seed",
-            "7",
-            "--out",
-            &s(samples),
-        ],
-    )?;
-    let evaluated = mfm(
-        exe,
-        &[
-            "eval",
-            "--samples",
-            &s(&samples.join("samples.npy")),
-            "--reference",
-            &s(reference),
-            "--out",
-            &s(metrics),
-            "--png",
-            &s(png),
-        ],
-    )?;
+    let sampled = mfm.output(&[
+        "sample",
+        "--run",
+        &s(run),
+        "--mesh",
+        &s(mesh),
+        "--n",
+        "64",
+        "--seed",
+        "7",
+        "--out",
+        &s(samples),
+    ])?;
+    let evaluated = mfm.output(&[
+        "eval",
+        "--samples",
+        &s(&samples.join("samples.npy")),
+        "--reference",
+        &s(reference),
+        "--out",
+        &s(metrics),
+        "--png",
+        &s(png),
+    ])?;
     Ok((sampled, evaluated))
 }
 
-/// Runs the demo, writing everything under `out`.
-pub fn run(env: &PyEnv, out: &Path) -> Result<()> {
-    let out = if out.is_absolute() {
-        out.to_path_buf()
-    } else {
-        crate::root().join(out)
-    };
+/// Runs the demo, writing everything under `out` (relative to the
+/// workspace root); `mfm`'s command lines are not echoed.
+///
+/// # Errors
+/// When a step fails.
+pub fn run(mfm: &Mfm, out: &Path) -> Result<()> {
+    let out = in_root(out);
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let exe = mfm_binary(env)?;
+    mfm.exe()?;
     // The clock starts after the build: it measures the job itself.
     let start = std::time::Instant::now();
     let s = |p: &Path| p.to_string_lossy().into_owned();
@@ -175,86 +129,74 @@ pub fn run(env: &PyEnv, out: &Path) -> Result<()> {
 
     println!("== GMM dataset on {DEMO_MESH} (train) and its half-refined remeshing (test)");
     let data = out.join("data");
-    mfm_live(
-        &exe,
-        &[
-            "dataset",
-            "gmm",
-            "--out",
-            &s(&data),
-            "--n",
-            "1000",
-            "--reference",
-            "100",
-            "--seed",
-            "0",
-        ],
-    )?;
+    mfm.run(&[
+        "dataset",
+        "gmm",
+        "--out",
+        &s(&data),
+        "--n",
+        "1000",
+        "--reference",
+        "100",
+        "--seed",
+        "0",
+    ])?;
     let test_mesh = data.join("reference/mesh.ply");
-    let report = mfm(&exe, &["info", &s(&test_mesh)])?;
+    let report = mfm.output(&["info", &s(&test_mesh)])?;
     tick("dataset", &mut timings);
 
     println!("== noise on the non-uniform test mesh: Matérn vs naive, same seed");
     let matern_png = out.join("matern.png");
     let naive_png = out.join("naive.png");
-    let noise = mfm(
-        &exe,
-        &[
-            "noise",
-            &s(&test_mesh),
-            "--kind",
-            "matern",
-            "--tau",
-            "100",
-            "--seed",
-            "1",
-            "--out",
-            &s(&out.join("matern.npy")),
-            "--png",
-            &s(&matern_png),
-        ],
-    )?;
-    mfm(
-        &exe,
-        &[
-            "noise",
-            &s(&test_mesh),
-            "--kind",
-            "naive",
-            "--seed",
-            "1",
-            "--out",
-            &s(&out.join("naive.npy")),
-            "--png",
-            &s(&naive_png),
-        ],
-    )?;
+    let noise = mfm.output(&[
+        "noise",
+        &s(&test_mesh),
+        "--kind",
+        "matern",
+        "--tau",
+        "100",
+        "--seed",
+        "1",
+        "--out",
+        &s(&out.join("matern.npy")),
+        "--png",
+        &s(&matern_png),
+    ])?;
+    mfm.output(&[
+        "noise",
+        &s(&test_mesh),
+        "--kind",
+        "naive",
+        "--seed",
+        "1",
+        "--out",
+        &s(&out.join("naive.npy")),
+        "--png",
+        &s(&naive_png),
+    ])?;
     println!("== noise spectrum on both triangulations");
-    let spectrum = mfm(
-        &exe,
-        &[
-            "spectrum",
-            &s(&data.join("train/mesh.ply")),
-            &s(&test_mesh),
-            "--tau",
-            "100",
-            "--samples",
-            "1000",
-            "--k",
-            "32",
-            "--out",
-            &s(&out.join("spectrum.json")),
-            "--plots",
-            &s(&out.join("spectrum")),
-        ],
-    )?;
+    let spectrum = mfm.output(&[
+        "spectrum",
+        &s(&data.join("train/mesh.ply")),
+        &s(&test_mesh),
+        "--tau",
+        "100",
+        "--samples",
+        "1000",
+        "--k",
+        "32",
+        "--out",
+        &s(&out.join("spectrum.json")),
+        "--plots",
+        &s(&out.join("spectrum")),
+    ])?;
     tick("noise", &mut timings);
 
     println!("== the pretrained model ({PRETRAINED_DIR}): sampling on the test mesh");
     let pretrained = match crate::pretrain::shipped() {
         Ok(dir) => {
             let (sampled, metrics) = sample_and_eval(
-                &exe,
+                mfm,
                 &dir,
                 &test_mesh,
                 &data.join("reference"),
@@ -275,25 +217,23 @@ pub fn run(env: &PyEnv, out: &Path) -> Result<()> {
     println!("== training (the {DEMO_PRESET} recipe, {DEMO_STEPS} steps, Matérn noise)");
     let run_dir = out.join("run");
     let config_path = out.join("run.toml");
-    std::fs::write(&config_path, DEMO_CONFIG)
+    let config = demo_config();
+    std::fs::write(&config_path, &config)
         .with_context(|| format!("cannot write {}", config_path.display()))?;
-    mfm_live(
-        &exe,
-        &[
-            "train",
-            "--config",
-            &s(&config_path),
-            "--dataset",
-            &s(&data.join("train")),
-            "--out",
-            &s(&run_dir),
-        ],
-    )?;
+    mfm.run(&[
+        "train",
+        "--config",
+        &s(&config_path),
+        "--dataset",
+        &s(&data.join("train")),
+        "--out",
+        &s(&run_dir),
+    ])?;
     tick("train", &mut timings);
 
     println!("== sampling on the non-uniform test mesh, metrics against the reference set");
     let (sampled, metrics) = sample_and_eval(
-        &exe,
+        mfm,
         &run_dir,
         &test_mesh,
         &data.join("reference"),
@@ -313,7 +253,7 @@ pub fn run(env: &PyEnv, out: &Path) -> Result<()> {
     println!(
         "== the pretrained shape model ({ELEPHANT_DIR}): the training mesh and a fine refinement"
     );
-    let shapes = shape_model(&exe, &out.join("elephant"))?;
+    let shapes = shape_model(mfm, &out.join("elephant"))?;
     tick("pretrained shape model", &mut timings);
 
     let mut md = String::new();
@@ -347,7 +287,7 @@ triangulation; naive per-vertex noise does (finer half, finer grain):\n\n\
     )?;
     match &pretrained {
         Some((sampled, metrics, readme)) => {
-            let m = crate::flow_steps::read_json(&out.join("pretrained_metrics.json"))?;
+            let m: EvalReport = reports::read(&out.join("pretrained_metrics.json"))?;
             writeln!(
                 md,
                 "## The pretrained model\n\n`{PRETRAINED_DIR}/` (shipped in the repository; \
@@ -369,14 +309,14 @@ How it was made:\n\n{}\n",
     writeln!(
         md,
         "## A few minutes of training\n\n`mfm train --config run.toml` ({DEMO_STEPS} steps of the {DEMO_PRESET} \
-network; log in `run/train_log.csv`, the frame and noise in `run/flow.json`):\n\n```toml\n{DEMO_CONFIG}```\n\n```\n{}\n```\n",
+network; log in `run/train_log.csv`, the frame and noise in `run/flow.json`):\n\n```toml\n{config}```\n\n```\n{}\n```\n",
         log_tail.join("\n")
     )?;
     writeln!(
         md,
         "## Its samples on the non-uniform mesh\n\n```\n{sampled}```\n\n![samples](samples/samples.png)\n"
     )?;
-    let metrics_json = crate::flow_steps::read_json(&out.join("metrics.json"))?;
+    let metrics_json: EvalReport = reports::read(&out.join("metrics.json"))?;
     writeln!(
         md,
         "## Do the samples look like the data?\n\nReference signals (top two rows) and \
@@ -403,13 +343,12 @@ compares noise kinds.\n"
     if pretrained.is_some() {
         rows.push((
             "pretrained",
-            crate::flow_steps::read_json(&out.join("pretrained_metrics.json"))?,
+            reports::read::<EvalReport>(&out.join("pretrained_metrics.json"))?,
         ));
     }
     rows.push(("this run", metrics_json.clone()));
     for (name, m) in &rows {
-        use crate::flow_steps::{Quality, num};
-        let q = Quality::of(m);
+        let q = Quality::of(Quality::section(m)?);
         writeln!(
             md,
             "| {name} | {:.3} | {:.2} | {:.2} | {:.0}% | {:.2} | {:.4} | {:.3} | {:.4} |",
@@ -418,9 +357,9 @@ compares noise kinds.\n"
             q.bumps,
             100.0 * q.within,
             q.diversity,
-            num(m, "mmd"),
-            num(m, "cov"),
-            num(m, "test_error")
+            m.metrics.mmd,
+            m.metrics.cov,
+            m.metrics.test_error
         )?;
     }
     writeln!(
@@ -460,11 +399,11 @@ const SHAPE_SUBDIVISIONS: &str = "4";
 /// (its training mesh is made from it, and the shared meshes are not part
 /// of the repository): without it, or without the model, the section says
 /// why it was skipped. Returns the report's section.
-fn shape_model(exe: &Path, out: &Path) -> Result<String> {
+fn shape_model(mfm: &Mfm, out: &Path) -> Result<String> {
     let s = |p: &Path| p.to_string_lossy().into_owned();
     let heading = "## A pretrained shape model at 768k faces\n\n";
-    let model = crate::root().join(ELEPHANT_DIR);
-    let mesh = crate::root().join(ELEPHANT_MESH);
+    let model = workspace::root().join(ELEPHANT_DIR);
+    let mesh = workspace::root().join(ELEPHANT_MESH);
     let skip = |why: String| -> Result<String> {
         println!("skipping the shape model: {why}");
         Ok(format!("{heading}Skipped: {why}.\n"))
@@ -480,35 +419,29 @@ fn shape_model(exe: &Path, out: &Path) -> Result<String> {
         ));
     }
     let data = out.join("data");
-    mfm_live(
-        exe,
-        &[
-            "dataset",
-            "deform",
-            "--mesh",
-            &s(&mesh),
-            "--n",
-            "8",
-            "--reference",
-            "4",
-            "--out",
-            &s(&data),
-        ],
-    )?;
+    mfm.run(&[
+        "dataset",
+        "deform",
+        "--mesh",
+        &s(&mesh),
+        "--n",
+        "8",
+        "--reference",
+        "4",
+        "--out",
+        &s(&data),
+    ])?;
     let coarse = data.join("coarse.ply");
     let fine = out.join("fine.ply");
-    mfm_live(
-        exe,
-        &[
-            "remesh",
-            &s(&coarse),
-            "--subdivide",
-            SHAPE_SUBDIVISIONS,
-            "--out",
-            &s(&fine),
-        ],
-    )?;
-    let sample = |mesh: &Path, dir: &str, extra: &[&str]| -> Result<serde_json::Value> {
+    mfm.run(&[
+        "remesh",
+        &s(&coarse),
+        "--subdivide",
+        SHAPE_SUBDIVISIONS,
+        "--out",
+        &s(&fine),
+    ])?;
+    let sample = |mesh: &Path, dir: &str, extra: &[&str]| -> Result<SampleTiming> {
         let target = out.join(dir);
         let mut args = vec![
             "sample".to_owned(),
@@ -524,14 +457,12 @@ fn shape_model(exe: &Path, out: &Path) -> Result<String> {
             s(&target),
         ];
         args.extend(extra.iter().map(|a| (*a).to_owned()));
-        let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        mfm_live(exe, &args)?;
-        crate::flow_steps::read_json(&target.join("timing.json"))
+        mfm.run(&args)?;
+        SampleTiming::of(&target)
     };
     let at_training = sample(&coarse, "coarse_samples", &[])?;
     let at_fine = sample(&fine, "fine_samples", &["--noise-from", &s(&coarse)])?;
     let readme = std::fs::read_to_string(model.join("README.md")).unwrap_or_default();
-    let n = |v: &serde_json::Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
     Ok(format!(
         "{heading}`{ELEPHANT_DIR}/` (shipped; `cargo xtask pretrain elephant` makes it \
 again): a shape model trained on as-rigid-as-possible poses of the elephant on a \
@@ -545,10 +476,10 @@ Its samples on the training mesh ({:.2} s a sample):\n\n\
 The same samples on the fine mesh ({:.1} s a sample):\n\n\
 ![samples on the fine mesh](elephant/fine_samples/samples.png)\n\n\
 How the model was made:\n\n{}\n",
-        n(&at_training, "vertices"),
-        n(&at_fine, "vertices"),
-        n(&at_training, "seconds_per_sample"),
-        n(&at_fine, "seconds_per_sample"),
+        at_training.vertices as f64,
+        at_fine.vertices as f64,
+        at_training.seconds_per_sample,
+        at_fine.seconds_per_sample,
         readme.lines().skip(1).collect::<Vec<_>>().join("\n").trim()
     ))
 }
@@ -559,14 +490,9 @@ const GOAL: (f64, f64, f64) = (0.8, 0.35, 2.5);
 
 /// The quality table of the report: quartiles of the generated set against
 /// the reference set, the first samples' numbers, and the goal.
-fn quality_section(metrics: &serde_json::Value) -> Result<String> {
-    use crate::flow_steps::{Quality, num};
-    let q = &metrics["quality"];
-    anyhow::ensure!(
-        q.is_object(),
-        "metrics.json has no quality section (mfm eval on a GMM reference set writes one)"
-    );
-    let (g, r) = (Quality::of(metrics), Quality::reference_of(metrics));
+fn quality_section(metrics: &EvalReport) -> Result<String> {
+    let q = Quality::section(metrics)?;
+    let (g, r) = (Quality::of(q), &q.reference);
     let quart = |v: [f64; 3]| format!("{:.3} [{:.3}, {:.3}]", v[1], v[0], v[2]);
     let mut md = String::new();
     writeln!(
@@ -585,9 +511,9 @@ fn quality_section(metrics: &serde_json::Value) -> Result<String> {
     writeln!(
         md,
         "| reference (the floor) | {} | {} | {:.2} | | 1 |\n",
-        quart(r.residual),
-        quart(r.peak),
-        r.bumps
+        quart(quartiles(r.residual)),
+        quart(quartiles(r.peak)),
+        r.bumps_above_half
     )?;
     let (peak, res, bumps) = (g.peak[1], g.residual[1], g.bumps);
     let mark = |ok: bool| if ok { "reached" } else { "not reached" };
@@ -614,16 +540,12 @@ recipe changes at equal budgets (`cargo xtask time-to-quality` reproduces them).
         md,
         "First generated samples:\n\n| sample | residual | peak | bumps above half height |\n|---|---|---|---|"
     )?;
-    if let Some(fits) = q["generated"]["fits"].as_array() {
-        for (i, f) in fits.iter().take(8).enumerate() {
-            writeln!(
-                md,
-                "| {i} | {:.3} | {:.2} | {} |",
-                num(f, "residual"),
-                num(f, "peak"),
-                f["bumps_above_half"].as_u64().unwrap_or(0)
-            )?;
-        }
+    for (i, f) in q.generated.fits.iter().take(8).enumerate() {
+        writeln!(
+            md,
+            "| {i} | {:.3} | {:.2} | {} |",
+            f.residual, f.peak, f.bumps_above_half
+        )?;
     }
     Ok(md)
 }

@@ -17,9 +17,13 @@
 //! peak, bumps per sample, COV and test error against steps, residual
 //! against training seconds).
 
-use crate::flow_steps::{Mfm, Quality, arg, num, out_dir, read_json};
-use crate::pyenv::PyEnv;
+use crate::flow_steps::{Quality, arg, train_args};
+use crate::mfm::Mfm;
+use crate::reports::{self, EvalOutcome};
+use crate::workspace::{self, in_root};
 use anyhow::{Context, Result, bail};
+use mfm_eval::metrics::Metrics;
+use mfm_files::run_folder::{CheckpointInfo, CheckpointState, STATE_FILE, list_checkpoints};
 use mfm_render::plots::{Curve, CurvePanel, curve_grid};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -233,55 +237,47 @@ impl Variant {
 /// One evaluated checkpoint.
 #[derive(Clone, Debug)]
 struct Point {
-    /// Sampling broke down (the quality numbers are NaN).
-    failed: bool,
     step: u64,
-    /// Samples the evaluation generated (0 when sampling failed).
-    samples: usize,
     seconds: f64,
+    /// The evaluation; `None` when sampling broke down.
+    evaluated: Option<Evaluated>,
+}
+
+/// What the report shows of a checkpoint's evaluation.
+#[derive(Clone, Debug)]
+struct Evaluated {
     quality: Quality,
-    cov: f64,
-    mmd: f64,
-    test_error: f64,
+    metrics: Metrics,
+}
+
+impl Point {
+    /// `f` of the evaluation, NaN (a gap in the curves) when sampling
+    /// failed.
+    fn value(&self, f: impl Fn(&Evaluated) -> f64) -> f64 {
+        self.evaluated.as_ref().map_or(f64::NAN, f)
+    }
 }
 
 /// Training seconds recorded in a checkpoint folder's `state.json`.
 fn checkpoint_seconds(dir: &Path) -> Result<f64> {
-    let state = read_json(&dir.join("state.json"))?;
-    Ok(num(&state, "elapsed_seconds"))
+    Ok(CheckpointState::read(dir)?.elapsed_seconds)
 }
 
-/// Checkpoint folders of a run as `(step, folder)`, ascending.
-fn checkpoints(run: &Path) -> Result<Vec<(u64, PathBuf)>> {
-    let dir = run.join("checkpoints");
-    if !dir.is_dir() {
-        return Ok(Vec::new());
-    }
-    let mut out = Vec::new();
-    for entry in
-        std::fs::read_dir(&dir).with_context(|| format!("cannot list {}", dir.display()))?
-    {
-        let entry = entry?;
-        let name = entry.file_name().to_string_lossy().into_owned();
-        let step = name
-            .strip_prefix("step-")
-            .and_then(|s| s.parse::<u64>().ok());
-        if let Some(step) = step
-            && entry.path().join("state.json").is_file()
-        {
-            out.push((step, entry.path()));
-        }
-    }
-    out.sort();
-    Ok(out)
+/// The complete checkpoints of a run (with their `state.json`, which is
+/// written last), ascending.
+fn checkpoints(run: &Path) -> Result<Vec<CheckpointInfo>> {
+    Ok(list_checkpoints(run)?
+        .into_iter()
+        .filter(|c| c.dir.join(STATE_FILE).is_file())
+        .collect())
 }
 
 /// Trains (or resumes) `run` until its training time reaches `budget`
 /// seconds; the run is stopped with SIGINT, which makes `mfm train` write a
 /// checkpoint and exit.
-fn train_for(exe: &Path, run: &Path, config: &Path, dataset: &Path, budget: f64) -> Result<()> {
+fn train_for(mfm: &Mfm, run: &Path, config: &Path, dataset: &Path, budget: f64) -> Result<()> {
     let done = match checkpoints(run)?.last() {
-        Some((_, dir)) => checkpoint_seconds(dir)?,
+        Some(c) => checkpoint_seconds(&c.dir)?,
         None => 0.0,
     };
     let left = budget - done;
@@ -292,8 +288,7 @@ fn train_for(exe: &Path, run: &Path, config: &Path, dataset: &Path, budget: f64)
         );
         return Ok(());
     }
-    let mut cmd = Command::new(exe);
-    cmd.args(crate::flow_steps::train_args(run, config, dataset));
+    let mut cmd = mfm.command(&train_args(run, config, dataset))?;
     cmd.arg("--quiet").stdin(Stdio::null());
     println!(
         "$ mfm {} (for {left:.0} s)",
@@ -304,7 +299,7 @@ fn train_for(exe: &Path, run: &Path, config: &Path, dataset: &Path, budget: f64)
     );
     let mut child = cmd
         .spawn()
-        .with_context(|| format!("cannot run {}", exe.display()))?;
+        .with_context(|| format!("cannot run mfm train on {}", run.display()))?;
     let start = Instant::now();
     let mut signalled = false;
     let status = loop {
@@ -315,7 +310,7 @@ fn train_for(exe: &Path, run: &Path, config: &Path, dataset: &Path, budget: f64)
         // its first step: those do not count as training time
         if !signalled && start.elapsed().as_secs_f64() > left + 5.0 {
             let pid = child.id().to_string();
-            crate::run(Command::new("kill").args(["-INT", &pid]))?;
+            workspace::run(Command::new("kill").args(["-INT", &pid]))?;
             signalled = true;
         }
         std::thread::sleep(Duration::from_millis(500));
@@ -329,22 +324,22 @@ fn train_for(exe: &Path, run: &Path, config: &Path, dataset: &Path, budget: f64)
 
 /// Samples and evaluates the kept checkpoints of `run` (and its newest
 /// one) that have no evaluation yet; returns every evaluated point.
-fn evaluate(mfm: &Mfm<'_>, variant_dir: &Path, data: &Path, samples: usize) -> Result<Vec<Point>> {
+fn evaluate(mfm: &Mfm, variant_dir: &Path, data: &Path, samples: usize) -> Result<Vec<Point>> {
     let run = variant_dir.join("run");
     let eval_dir = variant_dir.join("eval");
     std::fs::create_dir_all(&eval_dir)
         .with_context(|| format!("cannot create {}", eval_dir.display()))?;
     let all = checkpoints(&run)?;
-    let newest = all.last().map(|(s, _)| *s);
+    let newest = all.last().map(|c| c.step);
     let mut points = Vec::new();
-    for (step, dir) in &all {
+    for CheckpointInfo { step, dir } in &all {
         if !SNAPSHOTS.contains(step) && Some(*step) != newest {
             continue;
         }
         let json = eval_dir.join(format!("step-{step}.json"));
         // a failure recorded by an earlier run is tried again: it may have
         // been the machine (disk, memory), not the model
-        if !json.is_file() || read_json(&json)?["error"].is_string() {
+        if !json.is_file() || reports::read::<EvalOutcome>(&json)?.report().is_none() {
             let out = variant_dir.join("samples").join(format!("step-{step}"));
             if out.exists() {
                 std::fs::remove_dir_all(&out)
@@ -361,7 +356,7 @@ fn evaluate(mfm: &Mfm<'_>, variant_dir: &Path, data: &Path, samples: usize) -> R
             match sampled {
                 Ok(()) => {
                     let reference = arg(&data.join("reference"));
-                    mfm.eval(
+                    mfm.eval::<EvalOutcome>(
                         &out.join("samples.npy"),
                         &["--reference", &reference],
                         &json,
@@ -371,29 +366,32 @@ fn evaluate(mfm: &Mfm<'_>, variant_dir: &Path, data: &Path, samples: usize) -> R
                 // a model whose sampling breaks down is a result, not a crash
                 Err(e) => {
                     println!("step {step}: sampling failed ({e:#}); recorded as such");
-                    let record = serde_json::json!({ "error": format!("{e:#}") });
-                    std::fs::write(&json, serde_json::to_string_pretty(&record)?)
-                        .with_context(|| format!("cannot write {}", json.display()))?;
+                    reports::write(&json, &EvalOutcome::failed(&e))?;
                 }
             }
         }
-        let m = read_json(&json)?;
+        let evaluated = match reports::read::<EvalOutcome>(&json)? {
+            EvalOutcome::Report(r) => Some(Evaluated {
+                quality: Quality::of(Quality::section(&r)?),
+                metrics: r.metrics,
+            }),
+            EvalOutcome::Failed { .. } => None,
+        };
         points.push(Point {
-            failed: m["error"].is_string(),
             step: *step,
-            samples: m["num_generated"].as_u64().unwrap_or(0) as usize,
             seconds: checkpoint_seconds(dir)?,
-            quality: Quality::of(&m),
-            cov: num(&m, "cov"),
-            mmd: num(&m, "mmd"),
-            test_error: num(&m, "test_error"),
+            evaluated,
         });
     }
     Ok(points)
 }
 
 /// Runs the experiment.
-pub fn run(env: &PyEnv, args: &TimeToQualityArgs) -> Result<()> {
+///
+/// # Errors
+/// For arguments out of range, and when a step fails (a checkpoint whose
+/// sampling fails is recorded, not an error).
+pub fn run(mfm: &Mfm, args: &TimeToQualityArgs) -> Result<()> {
     let variants: Vec<Variant> = args
         .variants
         .iter()
@@ -412,10 +410,9 @@ pub fn run(env: &PyEnv, args: &TimeToQualityArgs) -> Result<()> {
     if args.samples < 2 {
         bail!("--samples must be at least 2, found {}", args.samples);
     }
-    let out = out_dir(&args.out);
+    let out = in_root(&args.out);
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let exe = crate::demo::mfm_binary(env)?;
-    let mfm = Mfm { exe: &exe };
+    mfm.exe()?;
     let data = out.join("data");
     mfm.ensure_gmm_dataset(&data, 1000)?;
     let mut results = Vec::new();
@@ -446,21 +443,21 @@ pub fn run(env: &PyEnv, args: &TimeToQualityArgs) -> Result<()> {
                 d
             };
             train_for(
-                &exe,
+                mfm,
                 &dir.join("run"),
                 &config,
                 &train_data.join("train"),
                 args.minutes * 60.0,
             )?;
         }
-        let points = evaluate(&mfm, &dir, &data, args.samples)?;
+        let points = evaluate(mfm, &dir, &data, args.samples)?;
         results.push((v.clone(), points));
     }
     write_report(&out, &results)?;
     let png = out.join("time_to_quality.png");
     plot(&png, &results)?;
     if let Some(p) = &args.plot {
-        let p = out_dir(p);
+        let p = in_root(p);
         std::fs::copy(&png, &p)
             .with_context(|| format!("cannot copy the plot to {}", p.display()))?;
     }
@@ -475,7 +472,7 @@ pub fn run(env: &PyEnv, args: &TimeToQualityArgs) -> Result<()> {
 fn first_below(points: &[Point], bound: f64) -> Option<&Point> {
     points
         .iter()
-        .find(|p| !p.failed && p.quality.residual[1] <= bound)
+        .find(|p| p.value(|e| e.quality.residual[1]) <= bound)
 }
 
 fn write_report(out: &Path, results: &[(Variant, Vec<Point>)]) -> Result<()> {
@@ -491,8 +488,11 @@ fn write_report(out: &Path, results: &[(Variant, Vec<Point>)]) -> Result<()> {
     for (v, points) in results {
         let (w, k, nl) = v.size;
         for p in points {
-            let q = &p.quality;
-            if p.failed {
+            let Some(Evaluated {
+                quality: q,
+                metrics: m,
+            }) = &p.evaluated
+            else {
                 writeln!(
                     csv,
                     "{},{w},{k},{nl},{},{:.1},0,,,,,,,,,,",
@@ -504,14 +504,14 @@ fn write_report(out: &Path, results: &[(Variant, Vec<Point>)]) -> Result<()> {
                     v.name, p.step, p.seconds
                 )?;
                 continue;
-            }
+            };
             writeln!(
                 csv,
                 "{},{w},{k},{nl},{},{:.1},{},{:.4},{:.4},{:.4},{:.3},{:.3},{:.3},{:.3},{:.5},{:.3},{:.5}",
                 v.name,
                 p.step,
                 p.seconds,
-                p.samples,
+                m.num_generated,
                 q.residual[0],
                 q.residual[1],
                 q.residual[2],
@@ -519,9 +519,9 @@ fn write_report(out: &Path, results: &[(Variant, Vec<Point>)]) -> Result<()> {
                 q.bumps,
                 q.within,
                 q.diversity,
-                p.mmd,
-                p.cov,
-                p.test_error
+                m.mmd,
+                m.cov,
+                m.test_error
             )?;
             writeln!(
                 md,
@@ -529,11 +529,11 @@ fn write_report(out: &Path, results: &[(Variant, Vec<Point>)]) -> Result<()> {
                 v.name,
                 p.step,
                 p.seconds,
-                p.samples,
+                m.num_generated,
                 q.cells(),
-                p.mmd,
-                p.cov,
-                p.test_error
+                m.mmd,
+                m.cov,
+                m.test_error
             )?;
         }
         let reach = |b: f64| {
@@ -544,8 +544,8 @@ fn write_report(out: &Path, results: &[(Variant, Vec<Point>)]) -> Result<()> {
         };
         let best = points
             .iter()
-            .filter(|p| !p.failed)
-            .map(|p| p.quality.residual[1])
+            .filter_map(|p| p.evaluated.as_ref())
+            .map(|e| e.quality.residual[1])
             .fold(f64::INFINITY, f64::min);
         let best = if best.is_finite() {
             format!("{best:.3}")
@@ -596,48 +596,49 @@ fn plot(path: &Path, results: &[(Variant, Vec<Point>)]) -> Result<()> {
             "training steps",
             "residual",
             goal(GOAL.0),
-            curves(&|p| (p.step as f64, p.quality.residual[1])),
+            curves(&|p| (p.step as f64, p.value(|e| e.quality.residual[1]))),
         ),
         panel(
             "bump-fit residual (median)",
             "training seconds (wall)",
             "residual",
             goal(GOAL.0),
-            curves(&|p| (p.seconds, p.quality.residual[1])),
+            curves(&|p| (p.seconds, p.value(|e| e.quality.residual[1]))),
         ),
         panel(
             "peak value (median)",
             "training steps",
             "peak",
             vec![(GOAL.1, "goal".into()), (1.0, "data".into())],
-            curves(&|p| (p.step as f64, p.quality.peak[1])),
+            curves(&|p| (p.step as f64, p.value(|e| e.quality.peak[1]))),
         ),
         panel(
             "bumps above half height per sample",
             "training steps",
             "bumps",
             vec![(GOAL.2, "goal".into()), (3.0, "data".into())],
-            curves(&|p| (p.step as f64, p.quality.bumps)),
+            curves(&|p| (p.step as f64, p.value(|e| e.quality.bumps))),
         ),
         panel(
             "COV",
             "training steps",
             "COV",
             Vec::new(),
-            curves(&|p| (p.step as f64, p.cov)),
+            curves(&|p| (p.step as f64, p.value(|e| e.metrics.cov))),
         ),
         panel(
             "GMM test error",
             "training steps",
             "test error",
             Vec::new(),
-            curves(&|p| (p.step as f64, p.test_error)),
+            curves(&|p| (p.step as f64, p.value(|e| e.metrics.test_error))),
         ),
     ];
     curve_grid(path, &panels, 3).with_context(|| format!("cannot draw {}", path.display()))
 }
 
 #[cfg(test)]
+#[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
 

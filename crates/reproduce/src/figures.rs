@@ -210,14 +210,13 @@ pub struct Summary {
 }
 
 /// Runs `reproduce-figures spectral` from the command line.
+///
+/// # Errors
+/// When the surface cannot be read or a stage fails.
 pub fn spectral(args: &SpectralArgs) -> Result<()> {
     let start = Instant::now();
-    let root = crate::root();
-    let out = if args.out.is_absolute() {
-        args.out.clone()
-    } else {
-        root.join(&args.out)
-    };
+    let root = crate::workspace::root();
+    let out = crate::workspace::in_root(&args.out);
     let mut config = if args.quick {
         SpectralConfig::quick()
     } else {
@@ -227,13 +226,7 @@ pub fn spectral(args: &SpectralArgs) -> Result<()> {
     if let Some(n) = args.samples {
         config.samples = n;
     }
-    let mesh = args.mesh.as_ref().map(|p| {
-        if p.is_absolute() {
-            p.clone()
-        } else {
-            root.join(p)
-        }
-    });
+    let mesh = args.mesh.as_deref().map(crate::workspace::in_root);
     let surface = surfaces::load(mesh.as_deref(), &root)?;
     let summary = run(&config, &surface, &out)?;
     println!(

@@ -16,10 +16,12 @@
 //! Drives the release `mfm` binary. Writes `table.md`, `table.json` and
 //! the folders and PNGs of every step.
 
-use crate::flow_steps::{Mfm, arg, fresh_dir, mesh_or_shared, out_dir, read_json};
-use crate::pyenv::PyEnv;
+use crate::flow_steps::{arg, fresh_dir, mesh_or_shared};
+use crate::mfm::Mfm;
+use crate::reports::{self, SetEvaluation};
+use crate::workspace::{self, in_root};
 use anyhow::Result;
-use serde_json::{Value, json};
+use serde_json::json;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -68,19 +70,21 @@ pub struct ArbitraryArgs {
 }
 
 /// Runs the experiment.
-pub fn arbitrary(env: &PyEnv, args: &ArbitraryArgs) -> Result<()> {
-    let out = out_dir(&args.out);
+///
+/// # Errors
+/// When a step fails.
+pub fn arbitrary(mfm: &Mfm, args: &ArbitraryArgs) -> Result<()> {
+    let out = in_root(&args.out);
     let mesh = mesh_or_shared(args.mesh.as_deref(), "alien.obj", "builtin:capsule");
     let other = match args.other.as_deref() {
         Some("none") => None,
         Some(m) => Some(m.to_owned()),
         None => {
-            let knight = crate::root().join("../shared/meshes/decimated-knight.off");
+            let knight = workspace::root().join("../shared/meshes/decimated-knight.off");
             knight.is_file().then(|| arg(&knight))
         }
     };
-    let exe = crate::demo::mfm_binary(env)?;
-    let mfm = Mfm { exe: &exe };
+    mfm.exe()?;
     fresh_dir(&out)?;
     let (data, predictor, flow, eval) = (
         out.join("data"),
@@ -143,7 +147,7 @@ pub fn arbitrary(env: &PyEnv, args: &ArbitraryArgs) -> Result<()> {
             .map(str::to_owned)
             .to_vec();
             a.extend(steps(args.predictor_steps).unwrap_or_default());
-            mfm.run(&a.iter().map(String::as_str).collect::<Vec<_>>())
+            mfm.run(&a)
         },
         &mut seconds,
     )?;
@@ -169,7 +173,7 @@ pub fn arbitrary(env: &PyEnv, args: &ArbitraryArgs) -> Result<()> {
             .map(str::to_owned)
             .to_vec();
             a.extend(steps(args.steps).unwrap_or_default());
-            mfm.run(&a.iter().map(String::as_str).collect::<Vec<_>>())
+            mfm.run(&a)
         },
         &mut seconds,
     )?;
@@ -215,8 +219,7 @@ pub fn arbitrary(env: &PyEnv, args: &ArbitraryArgs) -> Result<()> {
             &mut seconds,
         )?;
     }
-    let report = read_json(&eval.join("report.json"))?;
-    let sets = report.as_array().cloned().unwrap_or_default();
+    let sets: Vec<SetEvaluation> = reports::read(&eval.join("report.json"))?;
     let mut md = String::new();
     writeln!(
         md,
@@ -230,29 +233,26 @@ poses of the {}-face decimation, {} held-out shapes); preset `{}`, seed {}.\n",
 pose spread rot / trans (x data) | MMD | COV | predictor error (vectors 1-8) |"
     )?;
     writeln!(md, "|---|---|---|---|---|---|---|---|---|")?;
-    let f = |v: &Value, path: &[&str]| -> f64 {
-        path.iter()
-            .fold(v, |v, k| &v[*k])
-            .as_f64()
-            .unwrap_or(f64::NAN)
-    };
     for s in &sets {
+        let predictor = |q: Option<mfm_eval::quality::Quartiles>| {
+            q.map_or_else(|| "not measured".to_owned(), |q| format!("{:.3}", q.median))
+        };
         writeln!(
             md,
-            "| {} | {} | {:.2e} [{:.2e}, {:.2e}] | {:.1e} | {:.2} | {:.2} / {:.2} | {:.4} | {:.2} | {:.3} ({:.3}) |",
-            s["set"].as_str().unwrap_or("?"),
-            s["vertices"],
-            f(s, &["projection", "median"]),
-            f(s, &["projection", "q1"]),
-            f(s, &["projection", "q3"]),
-            f(s, &["projection_floor", "median"]),
-            f(s, &["displacement_ratio"]),
-            f(s, &["pose_spread", "rotation"]) / f(s, &["reference_pose_spread", "rotation"]),
-            f(s, &["pose_spread", "translation"]) / f(s, &["reference_pose_spread", "translation"]),
-            f(s, &["mmd"]),
-            f(s, &["cov"]),
-            f(s, &["predictor_error", "median"]),
-            f(s, &["predictor_error_low", "median"]),
+            "| {} | {} | {:.2e} [{:.2e}, {:.2e}] | {:.1e} | {:.2} | {:.2} / {:.2} | {:.4} | {:.2} | {} ({}) |",
+            s.set,
+            s.vertices,
+            s.projection.median,
+            s.projection.q1,
+            s.projection.q3,
+            s.projection_floor.median,
+            s.displacement_ratio,
+            s.pose_spread.rotation / s.reference_pose_spread.rotation,
+            s.pose_spread.translation / s.reference_pose_spread.translation,
+            s.mmd,
+            s.cov,
+            predictor(s.predictor_error),
+            predictor(s.predictor_error_low),
         )?;
     }
     writeln!(md)?;

@@ -61,12 +61,15 @@ fn cache_root() -> Result<PathBuf> {
 }
 
 /// The interpreter environments are created with (`$MFM_BASE_PYTHON` or `python3`).
-pub(crate) fn base_python() -> String {
+pub fn base_python() -> String {
     std::env::var("MFM_BASE_PYTHON").unwrap_or_else(|_| "python3".to_owned())
 }
 
 /// `311` for Python 3.11.
-pub(crate) fn python_tag(python: &str) -> Result<String> {
+///
+/// # Errors
+/// When `python` cannot run or fails.
+pub fn python_tag(python: &str) -> Result<String> {
     let out = Command::new(python)
         .args([
             "-c",
@@ -86,6 +89,10 @@ pub(crate) fn python_tag(python: &str) -> Result<String> {
 }
 
 /// The folder of the environment, created or not.
+///
+/// # Errors
+/// When the base interpreter cannot tell its version, or no cache folder
+/// is known.
 pub fn env_dir() -> Result<PathBuf> {
     if let Some(d) = std::env::var_os("MFM_PYENV") {
         return Ok(PathBuf::from(d));
@@ -111,6 +118,9 @@ fn run(cmd: &mut Command) -> Result<()> {
 
 /// Finds or creates the environment. Installing takes about a minute and
 /// 4.7 GB; a second call returns at once.
+///
+/// # Errors
+/// When the install fails, or its libtorch folder has no `lib/`.
 pub fn ensure() -> Result<PyEnv> {
     let dir = env_dir()?;
     let python = dir.join("bin/python");

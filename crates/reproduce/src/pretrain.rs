@@ -3,7 +3,7 @@
 //!
 //! Trains the GMM blob model that `cargo xtask demo` samples from first
 //! (the demo's dataset: Gaussian-bump signals on the built-in blob, seed 0)
-//! with [`PRETRAIN_CONFIG`], evaluates it on the demo's test mesh, and
+//! with [`pretrain_config`], evaluates it on the demo's test mesh, and
 //! installs the run into `fixtures/pretrained/gmm-blob/`: `config.toml`,
 //! `flow.json`, `model.safetensors` with `model.json` and the checksums in
 //! `model.state.json`, `train_log.csv`, and `README.md` with the command,
@@ -12,9 +12,12 @@
 //! the shipped model as it was. Training resumes when the scratch run
 //! folder (`out/pretrain/gmm/run`) already holds checkpoints.
 
-use crate::flow_steps::{Mfm, Quality, arg, num, out_dir, train_args};
-use crate::pyenv::PyEnv;
+use crate::flow_steps::{Quality, arg, train_args};
+use crate::mfm::Mfm;
+use crate::reports::EvalReport;
+use crate::workspace::{self, in_root};
 use anyhow::{Context, Result, bail};
+use mfm_files::run_folder;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -35,18 +38,24 @@ pub const MODEL_FILES: [&str; 6] = [
 /// generator, seed and count).
 pub const PRETRAIN_SIGNALS: usize = 1000;
 
-/// The pretrained model's run configuration: the `cpu` preset's recipe
-/// (see `RunConfig::preset("cpu")`: the official loss, sampling with the
-/// weight average, and the two changes that won the controlled runs of
-/// docs/BENCHMARKS.md, "Training beyond the paper") at width 32, 3 blocks,
-/// for 5000 steps on one thread: a linear warm-up over 250 steps (the
-/// preset's 5%) to a peak rate of 4e-3, then a cosine decay to 1e-5 at the
-/// last step, and path times drawn from a logit-normal instead of the
-/// uniform. A run is a pure
-/// function of its seed, data and thread count, so the command makes the
-/// same weights again.
-pub const PRETRAIN_CONFIG: &str = "\
-# cargo xtask pretrain gmm: the pretrained demo model
+/// Steps of the pretrained GMM model.
+pub const PRETRAIN_STEPS: u64 = 5000;
+
+/// The GMM blob recipe, the pretrained model's and the demo's run
+/// configuration, trained for `steps` steps: the `cpu` preset's recipe (see
+/// `RunConfig::preset("cpu")`: the official loss, sampling with the weight
+/// average, and the two changes that won the controlled runs of
+/// docs/BENCHMARKS.md, "Training beyond the paper") at width 32, 3 blocks:
+/// a linear warm-up over 250 steps to a peak rate of 4e-3, then a cosine
+/// decay to 1e-5 at the last step, and path times drawn from a
+/// logit-normal instead of the uniform. `threads` pins the thread count (a
+/// run is a pure function of its seed, data and thread count, so a pinned
+/// run makes the same weights again); `comment` is the file's first line.
+pub fn gmm_config(comment: &str, steps: u64, threads: Option<usize>) -> String {
+    let threads = threads.map_or_else(String::new, |t| format!("threads = {t}\n"));
+    format!(
+        "\
+# {comment}
 [model]
 preset = \"small\"
 width = 32
@@ -54,18 +63,32 @@ blocks = 3
 vector_layers = 3
 
 [train]
-steps = 5000
+steps = {steps}
 batch = 4
 lr = 4e-3
-lr_schedule = { warmup = 250, cosine = 5000, floor = 1e-5 }
+lr_schedule = {{ warmup = 250, cosine = {steps}, floor = 1e-5 }}
 ema = 0.999
 time = \"logit-normal\"
-threads = 1
-checkpoint_every = 500
+{threads}checkpoint_every = 500
 log_every = 100
-";
+"
+    )
+}
 
-/// Arguments of `cargo xtask pretrain gmm`.
+/// The pretrained model's run configuration: [`gmm_config`] for
+/// [`PRETRAIN_STEPS`] steps on one thread, so that the command makes the
+/// same weights again.
+pub fn pretrain_config() -> String {
+    gmm_config(
+        "cargo xtask pretrain gmm: the pretrained demo model",
+        PRETRAIN_STEPS,
+        Some(1),
+    )
+}
+
+/// Arguments of `cargo xtask pretrain gmm` (and `elephant`).
+// the field's doc is also its `--help` text, where `<model>` reads as meant
+#[allow(rustdoc::invalid_html_tags)]
 #[derive(clap::Args)]
 pub struct PretrainArgs {
     /// Scratch folder of the dataset and the run (default:
@@ -75,18 +98,20 @@ pub struct PretrainArgs {
 }
 
 /// Trains, evaluates and installs the pretrained GMM model.
-pub fn gmm(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
-    let out = out_dir(args.out.as_deref().unwrap_or(Path::new("out/pretrain/gmm")));
+///
+/// # Errors
+/// When a step fails.
+pub fn gmm(mfm: &Mfm, args: &PretrainArgs) -> Result<()> {
+    let out = in_root(args.out.as_deref().unwrap_or(Path::new("out/pretrain/gmm")));
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let exe = crate::demo::mfm_binary(env)?;
-    let mfm = Mfm { exe: &exe };
+    mfm.exe()?;
     let data = out.join("data");
     mfm.ensure_gmm_dataset(&data, PRETRAIN_SIGNALS)?;
     let config = out.join("run.toml");
-    std::fs::write(&config, PRETRAIN_CONFIG)
+    std::fs::write(&config, pretrain_config())
         .with_context(|| format!("cannot write {}", config.display()))?;
     let run = out.join("run");
-    let train_seconds = train_or_resume(&mfm, &config, &data.join("train"), &run)?;
+    let train_seconds = train_or_resume(mfm, &config, &data.join("train"), &run)?;
 
     // the demo's evaluation: 64 samples on the test mesh, seed 7
     let samples = out.join("samples");
@@ -97,13 +122,13 @@ pub fn gmm(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
     let test_mesh = data.join("reference/mesh.ply");
     mfm.sample(&run, &test_mesh, 64, 7, &samples, &["--ply", "0"])?;
     let reference = arg(&data.join("reference"));
-    let metrics = mfm.eval(
+    let metrics: EvalReport = mfm.eval(
         &samples.join("samples.npy"),
         &["--reference", &reference],
         &out.join("metrics.json"),
         Some(&out.join("means.png")),
     )?;
-    let q = Quality::of(&metrics);
+    let q = Quality::of(Quality::section(&metrics)?);
 
     let target = install(&run, PRETRAINED_DIR, &|| -> Result<String> {
         let mut md = String::new();
@@ -128,10 +153,10 @@ pub fn gmm(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
             md,
             "| {} | {:.4} | {:.3} | {:.3} | {:.4} |",
             q.cells(),
-            num(&metrics, "mmd"),
-            num(&metrics, "cov"),
-            num(&metrics, "one_nna"),
-            num(&metrics, "test_error")
+            metrics.metrics.mmd,
+            metrics.metrics.cov,
+            metrics.metrics.one_nna,
+            metrics.metrics.test_error
         )?;
         Ok(md)
     })?;
@@ -150,7 +175,7 @@ pub fn gmm(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
 /// workspace root), replacing the folder whole: it is filled beside it,
 /// then renamed, so an interruption leaves the shipped model as it was.
 fn install(run: &Path, dir: &str, readme: &dyn Fn() -> Result<String>) -> Result<PathBuf> {
-    let target = crate::root().join(dir);
+    let target = workspace::root().join(dir);
     let parent = target
         .parent()
         .context("the pretrained folder has a parent")?;
@@ -195,17 +220,13 @@ fn train_or_resume(mfm: &Mfm, config: &Path, dataset: &Path, run: &Path) -> Resu
     if run.join("model.safetensors").is_file() {
         println!("{} is trained already", run.display());
     } else {
-        let args = train_args(run, config, dataset);
-        mfm.run(&args.iter().map(String::as_str).collect::<Vec<_>>())?;
+        mfm.run(&train_args(run, config, dataset))?;
     }
-    let log = std::fs::read_to_string(run.join("train_log.csv"))
-        .with_context(|| format!("cannot read {}", run.join("train_log.csv").display()))?;
-    Ok(log
-        .lines()
+    let log = run_folder::read_log(run)?;
+    let last = log
         .last()
-        .and_then(|l| l.rsplit(',').next())
-        .and_then(|s| s.parse::<f64>().ok())
-        .unwrap_or(f64::NAN))
+        .with_context(|| format!("the log of {} has no rows", run.display()))?;
+    Ok(last.seconds)
 }
 
 /// Where the pretrained shape model lives, relative to the workspace root.
@@ -255,8 +276,11 @@ steps = 5
 /// defaults: 400 training shapes on a 3000-face mesh, 100 held out),
 /// [`ELEPHANT_CONFIG`], judged by 32 samples on the non-uniform evaluation
 /// mesh against the held-out shapes.
-pub fn elephant(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
-    let mesh = crate::root().join(ELEPHANT_MESH);
+///
+/// # Errors
+/// When the shared elephant mesh is not there, or a step fails.
+pub fn elephant(mfm: &Mfm, args: &PretrainArgs) -> Result<()> {
+    let mesh = workspace::root().join(ELEPHANT_MESH);
     if !mesh.is_file() {
         bail!(
             "{} not found: the elephant model is trained on the shared meshes, \
@@ -264,14 +288,13 @@ pub fn elephant(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
             mesh.display()
         );
     }
-    let out = out_dir(
+    let out = in_root(
         args.out
             .as_deref()
             .unwrap_or(Path::new("out/pretrain/elephant")),
     );
     std::fs::create_dir_all(&out).with_context(|| format!("cannot create {}", out.display()))?;
-    let exe = crate::demo::mfm_binary(env)?;
-    let mfm = Mfm { exe: &exe };
+    mfm.exe()?;
     let data = out.join("data");
     if !data.join("train").is_dir() {
         mfm.run(&[
@@ -287,7 +310,7 @@ pub fn elephant(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
     std::fs::write(&config, ELEPHANT_CONFIG)
         .with_context(|| format!("cannot write {}", config.display()))?;
     let run = out.join("run");
-    let train_seconds = train_or_resume(&mfm, &config, &data.join("train"), &run)?;
+    let train_seconds = train_or_resume(mfm, &config, &data.join("train"), &run)?;
     let samples = out.join("samples");
     if samples.exists() {
         std::fs::remove_dir_all(&samples)
@@ -301,12 +324,18 @@ pub fn elephant(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
         &samples,
         &["--ply", "0"],
     )?;
-    let metrics = mfm.eval(
+    let metrics: EvalReport = mfm.eval(
         &samples.join("samples.npy"),
         &["--reference", &arg(&data)],
         &out.join("metrics.json"),
         Some(&out.join("eval.png")),
     )?;
+    let shapes = metrics.shapes.as_ref().with_context(|| {
+        format!(
+            "{}: the evaluation has no projection (mfm eval on a deformation set writes one)",
+            out.join("metrics.json").display()
+        )
+    })?;
     let target = install(&run, ELEPHANT_DIR, &|| -> Result<String> {
         let mut md = String::new();
         writeln!(md, "# Pretrained shape model: elephant poses\n")?;
@@ -329,21 +358,15 @@ pub fn elephant(env: &PyEnv, args: &PretrainArgs) -> Result<()> {
             md,
             "| projection MSE (median) | rotation spread / data's | translation spread / data's | MMD | COV | 1-NNA |\n|---|---|---|---|---|---|"
         )?;
-        let spread = |key: &str| {
-            metrics
-                .pointer(&format!("/spread_ratio/{key}"))
-                .and_then(|v| v.as_f64())
-                .unwrap_or(f64::NAN)
-        };
         writeln!(
             md,
             "| {:.3e} | {:.2} | {:.2} | {:.4} | {:.3} | {:.3} |",
-            num(&metrics, "projection_mse_median"),
-            spread("rotation"),
-            spread("translation"),
-            num(&metrics, "mmd"),
-            num(&metrics, "cov"),
-            num(&metrics, "one_nna"),
+            shapes.projection_mse_median,
+            shapes.spread_ratio.rotation,
+            shapes.spread_ratio.translation,
+            metrics.metrics.mmd,
+            metrics.metrics.cov,
+            metrics.metrics.one_nna,
         )?;
         Ok(md)
     })?;
@@ -366,7 +389,7 @@ pub fn shipped() -> Result<PathBuf> {
 /// # Errors
 /// When a file of [`MODEL_FILES`] is missing.
 pub fn shipped_at(dir: &str, model: &str) -> Result<PathBuf> {
-    let dir = crate::root().join(dir);
+    let dir = workspace::root().join(dir);
     for name in MODEL_FILES {
         if !dir.join(name).is_file() {
             bail!(
@@ -376,4 +399,38 @@ pub fn shipped_at(dir: &str, model: &str) -> Result<PathBuf> {
         }
     }
     Ok(dir)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_demo_and_the_pretrained_model_share_one_recipe() {
+        let (demo, pretrained) = (crate::demo::demo_config(), pretrain_config());
+        assert!(pretrained.contains("\nthreads = 1\n") && !demo.contains("threads"));
+        assert!(
+            pretrained.contains("\nlr_schedule = { warmup = 250, cosine = 5000, floor = 1e-5 }\n")
+        );
+        // besides the thread count, only the first line and the step count
+        // (where the decay ends) differ
+        let pretrained = pretrained.replace("threads = 1\n", "");
+        let differing: Vec<(&str, &str)> = demo
+            .lines()
+            .zip(pretrained.lines())
+            .filter(|(a, b)| a != b)
+            .collect();
+        assert_eq!(demo.lines().count(), pretrained.lines().count());
+        assert_eq!(
+            differing[1..],
+            [
+                ("steps = 2000", "steps = 5000"),
+                (
+                    "lr_schedule = { warmup = 250, cosine = 2000, floor = 1e-5 }",
+                    "lr_schedule = { warmup = 250, cosine = 5000, floor = 1e-5 }"
+                )
+            ]
+        );
+        assert!(differing[0].0.starts_with("# mfm demo run"));
+    }
 }

@@ -2,23 +2,18 @@
 //! `mfm` binary (train, sample, eval), and the folder and mesh choices they
 //! share.
 
+use crate::mfm::Mfm;
+use crate::reports::{self, EvalOutcome};
+use crate::workspace;
 use anyhow::{Context, Result};
-use serde_json::Value;
+use mfm_eval::quality::{GmmQualityReport, Quartiles};
+use serde::de::DeserializeOwned;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// `p` as a command-line argument.
 pub fn arg(p: &Path) -> String {
     p.to_string_lossy().into_owned()
-}
-
-/// `path` if absolute, else relative to the workspace root.
-pub fn out_dir(path: &Path) -> PathBuf {
-    if path.is_absolute() {
-        path.to_path_buf()
-    } else {
-        crate::root().join(path)
-    }
 }
 
 /// Removes a previous `dir` and creates it empty.
@@ -36,7 +31,7 @@ pub fn mesh_or_shared(mesh: Option<&str>, name: &str, fallback: &str) -> String 
     if let Some(m) = mesh {
         return m.to_owned();
     }
-    let shared = crate::root().join("../shared/meshes").join(name);
+    let shared = workspace::root().join("../shared/meshes").join(name);
     if shared.is_file() {
         arg(&shared)
     } else {
@@ -52,9 +47,9 @@ pub fn tag(kind: &str) -> String {
         .collect()
 }
 
-/// The number `v[k]`, NaN when it is missing.
-pub fn num(v: &Value, k: &str) -> f64 {
-    v[k].as_f64().unwrap_or(f64::NAN)
+/// `[q1, median, q3]`.
+pub fn quartiles(q: Quartiles) -> [f64; 3] {
+    [q.q1, q.median, q.q3]
 }
 
 /// What each noise kind of a figure's comparison table is trained on and
@@ -87,23 +82,17 @@ pub struct KindResult {
     pub kind: String,
     /// The run folder.
     pub run: PathBuf,
-    /// `mfm eval`'s metrics, or `{"error": message}` when sampling broke
-    /// down (a result of the experiment, not a crash).
-    pub metrics: Value,
+    /// `mfm eval`'s report, or the failure when sampling broke down (a
+    /// result of the experiment, not a crash).
+    pub metrics: EvalOutcome,
     /// Wall seconds of training.
     pub train_seconds: f64,
     /// Wall seconds of sampling (until the failure, if it failed).
     pub sample_seconds: f64,
 }
 
-impl KindResult {
-    /// Whether sampling failed.
-    pub fn failed(&self) -> bool {
-        self.metrics["error"].is_string()
-    }
-}
-
-/// The bump-fit numbers of one set in an `mfm eval` report (`quality`).
+/// The generated set's bump-fit numbers in an `mfm eval` report of a GMM
+/// reference set (its `quality`).
 #[derive(Clone, Debug)]
 pub struct Quality {
     /// q1, median, q3 of the residual.
@@ -112,31 +101,32 @@ pub struct Quality {
     pub peak: [f64; 3],
     /// Mean bumps above half height per sample.
     pub bumps: f64,
-    /// Fraction of data-like samples (NaN for the reference set).
+    /// Fraction of data-like samples.
     pub within: f64,
-    /// Diversity against the reference set (1 for the reference set).
+    /// Diversity against the reference set.
     pub diversity: f64,
 }
 
 impl Quality {
-    fn set(q: &Value, within: f64, diversity: f64) -> Self {
-        let quartiles = |v: &Value| [num(v, "q1"), num(v, "median"), num(v, "q3")];
+    /// The generated set's numbers of `q`.
+    pub fn of(q: &GmmQualityReport) -> Self {
+        let g = &q.generated;
         Self {
-            residual: quartiles(&q["residual"]),
-            peak: quartiles(&q["peak"]),
-            bumps: num(q, "bumps_above_half"),
-            within,
-            diversity,
+            residual: quartiles(g.residual),
+            peak: quartiles(g.peak),
+            bumps: g.bumps_above_half,
+            within: q.within_twice_floor,
+            diversity: q.diversity,
         }
     }
 
-    /// The generated set's numbers.
-    pub fn of(metrics: &Value) -> Self {
-        let q = &metrics["quality"];
-        Self::set(
-            &q["generated"],
-            num(q, "within_twice_floor"),
-            num(q, "diversity"),
+    /// The quality section of `report`.
+    ///
+    /// # Errors
+    /// When it has none (`mfm eval` writes one for GMM reference sets).
+    pub fn section(report: &reports::EvalReport) -> Result<&GmmQualityReport> {
+        report.quality.as_ref().context(
+            "the evaluation has no quality section (mfm eval on a GMM reference set writes one)",
         )
     }
 
@@ -154,17 +144,15 @@ impl Quality {
             self.diversity
         )
     }
-
-    /// The reference set's numbers.
-    pub fn reference_of(metrics: &Value) -> Self {
-        Self::set(&metrics["quality"]["reference"], f64::NAN, 1.0)
-    }
 }
 
-impl Mfm<'_> {
+impl Mfm {
     /// The demo's GMM data in `data` (`n` training signals on the built-in
     /// blob, 100 reference signals on its half-refined remeshing, seed 0),
     /// made unless a complete one is there (an incomplete one is replaced).
+    ///
+    /// # Errors
+    /// When `mfm dataset gmm` fails.
     pub fn ensure_gmm_dataset(&self, data: &Path, n: usize) -> Result<()> {
         if data.join("reference/mesh.ply").is_file() {
             return Ok(());
@@ -186,93 +174,12 @@ impl Mfm<'_> {
             "0",
         ])
     }
-}
-
-/// Runs `cmd` (with the standard streams it was given) to its end and
-/// returns the peak resident memory of the process, in bytes (`wait4`);
-/// a failure is an error with the program's arguments and, when `cmd`
-/// pipes its standard error, what it wrote there.
-pub fn run_with_peak_memory(cmd: &mut std::process::Command) -> Result<u64> {
-    let call = cmd
-        .get_args()
-        .map(|a| a.to_string_lossy().into_owned())
-        .collect::<Vec<_>>()
-        .join(" ");
-    let child = cmd
-        .spawn()
-        .with_context(|| format!("cannot run {}", cmd.get_program().to_string_lossy()))?;
-    let pid = child.id() as libc::pid_t;
-    let mut status = 0;
-    // SAFETY: an all-zero rusage is a valid value for wait4 to fill.
-    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
-    // SAFETY: waits for our own child (not through `child`, which is never
-    // waited for); both pointers are valid for writes.
-    let waited = unsafe { libc::wait4(pid, &mut status, 0, &mut usage) };
-    if waited != pid {
-        anyhow::bail!(
-            "waiting for mfm {call} failed: {}",
-            std::io::Error::last_os_error()
-        );
-    }
-    if !(libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0) {
-        let mut err = String::new();
-        if let Some(mut e) = child.stderr {
-            use std::io::Read as _;
-            let _ = e.read_to_string(&mut err);
-        }
-        anyhow::bail!("mfm {call} failed (wait status {status}): {err}");
-    }
-    // ru_maxrss is in KiB on Linux
-    Ok(u64::try_from(usage.ru_maxrss).unwrap_or(0) * 1024)
-}
-
-/// The arguments of `mfm train` that train `config` on `dataset` into
-/// `run`, or resume `run` when it already holds its `config.toml`.
-pub fn train_args(run: &Path, config: &Path, dataset: &Path) -> Vec<String> {
-    let (out, data) = (arg(run), arg(dataset));
-    if run.join("config.toml").is_file() {
-        ["train", "--resume", "--out", &out, "--dataset", &data]
-            .map(str::to_owned)
-            .to_vec()
-    } else {
-        let config = arg(config);
-        [
-            "train",
-            "--config",
-            &config,
-            "--dataset",
-            &data,
-            "--out",
-            &out,
-        ]
-        .map(str::to_owned)
-        .to_vec()
-    }
-}
-
-/// Reads a JSON file.
-pub fn read_json(path: &Path) -> Result<Value> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("{}: invalid JSON", path.display()))
-}
-
-/// The release `mfm` binary, with its output shown live.
-pub struct Mfm<'a> {
-    /// Path of the binary.
-    pub exe: &'a Path,
-}
-
-impl Mfm<'_> {
-    /// Runs `mfm ARGS`, echoing the command line.
-    pub fn run(&self, args: &[&str]) -> Result<()> {
-        println!("$ mfm {}", args.join(" "));
-        crate::demo::mfm_live(self.exe, args)
-    }
 
     /// `mfm train --preset PRESET --dataset D --out RUN --steps S --seed
     /// SEED --noise KIND --quiet`; returns the wall seconds.
-    #[allow(clippy::too_many_arguments)]
+    ///
+    /// # Errors
+    /// When training fails.
     pub fn train(
         &self,
         preset: &str,
@@ -304,6 +211,9 @@ impl Mfm<'_> {
 
     /// `mfm sample --run RUN --mesh MESH --n N --seed SEED --out OUT
     /// [EXTRA...]`.
+    ///
+    /// # Errors
+    /// When sampling fails.
     pub fn sample(
         &self,
         run: &Path,
@@ -328,15 +238,22 @@ impl Mfm<'_> {
     }
 
     /// `mfm eval --samples SAMPLES AGAINST... --out OUT [--png PNG]`, where
-    /// `against` is `["--reference", DIR]` or `["--space", S, "--mesh", M]`;
-    /// returns the metrics JSON.
-    pub fn eval(
+    /// `against` is `["--reference", DIR]` (an [`EvalReport`] comes back)
+    /// or `["--space", S, "--mesh", M]` (a [`PlausibilityReport`]); returns
+    /// the report it wrote.
+    ///
+    /// [`EvalReport`]: reports::EvalReport
+    /// [`PlausibilityReport`]: reports::PlausibilityReport
+    ///
+    /// # Errors
+    /// When the evaluation fails or its report is not a `T`.
+    pub fn eval<T: DeserializeOwned>(
         &self,
         samples: &Path,
         against: &[&str],
         out: &Path,
         png: Option<&Path>,
-    ) -> Result<Value> {
+    ) -> Result<T> {
         let (samples, out_arg) = (arg(samples), arg(out));
         let mut args = vec!["eval", "--samples", &samples];
         args.extend_from_slice(against);
@@ -346,12 +263,15 @@ impl Mfm<'_> {
             args.extend_from_slice(&["--png", p]);
         }
         self.run(&args)?;
-        read_json(out)
+        reports::read(out)
     }
 
     /// Trains `kind` as `c` says, samples on the test mesh and evaluates the
     /// samples against the reference set. A kind whose sampling breaks down
-    /// gives a row with `{"error": ...}` (and says so) instead of an error.
+    /// gives a row with the failure (and says so) instead of an error.
+    ///
+    /// # Errors
+    /// When training or the evaluation fails.
     pub fn compare_kind(&self, c: &Comparison<'_>, kind: &str) -> Result<KindResult> {
         let tag = tag(kind);
         let run = c.out.join(format!("run_{tag}"));
@@ -361,15 +281,15 @@ impl Mfm<'_> {
         let sampled = self.sample(&run, c.test_mesh, c.samples, c.seed, &samples, &[]);
         let sample_seconds = t.elapsed().as_secs_f64();
         let metrics = match sampled {
-            Ok(()) => self.eval(
+            Ok(()) => EvalOutcome::Report(Box::new(self.eval(
                 &samples.join("samples.npy"),
                 &["--reference", &arg(c.reference)],
                 &c.out.join(format!("metrics_{tag}.json")),
                 Some(&c.out.join(format!("{}_{tag}.png", c.picture))),
-            )?,
+            )?)),
             Err(e) => {
                 println!("{kind}: sampling failed: {e:#}");
-                serde_json::json!({ "error": format!("{e:#}") })
+                EvalOutcome::failed(&e)
             }
         };
         Ok(KindResult {
@@ -379,5 +299,29 @@ impl Mfm<'_> {
             train_seconds,
             sample_seconds,
         })
+    }
+}
+
+/// The arguments of `mfm train` that train `config` on `dataset` into
+/// `run`, or resume `run` when it already holds its `config.toml`.
+pub fn train_args(run: &Path, config: &Path, dataset: &Path) -> Vec<String> {
+    let (out, data) = (arg(run), arg(dataset));
+    if run.join(mfm_files::owned::RUN_CONFIG).is_file() {
+        ["train", "--resume", "--out", &out, "--dataset", &data]
+            .map(str::to_owned)
+            .to_vec()
+    } else {
+        let config = arg(config);
+        [
+            "train",
+            "--config",
+            &config,
+            "--dataset",
+            &data,
+            "--out",
+            &out,
+        ]
+        .map(str::to_owned)
+        .to_vec()
     }
 }

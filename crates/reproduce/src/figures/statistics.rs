@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result, ensure};
 use mfm_geometry::operators::Operators;
-use mfm_noise::spectrum::{self, Eigenpairs, SpectralAnalyzer, SpectrumReport};
+use mfm_noise::spectrum::{self, Eigenpairs, MeshSpectrum, SpectrumReport, SpectrumRequest};
 use mfm_noise::{NoiseKind, NoiseSampler, stream};
 use serde::Serialize;
 use std::time::Instant;
@@ -131,9 +131,9 @@ pub struct KindStats {
 }
 
 /// Draws `samples` scalar samples of `kind` on `mesh` from `seed` (in chunks)
-/// and analyses them on its eigenpairs, keeping every value of the
-/// coefficients in `keep` (indices at or beyond the eigenpair count are
-/// dropped).
+/// and analyses them on its eigenpairs ([`MeshSpectrum::measure_on`]),
+/// keeping every value of the coefficients in `keep` (indices at or beyond
+/// the eigenpair count are dropped) and the energy of every sample.
 pub fn sample_and_analyze(
     mesh: &Analyzed,
     kind: NoiseKind,
@@ -147,31 +147,39 @@ pub fn sample_and_analyze(
     let mass = &mesh.ops.mass;
     let sampler = NoiseSampler::from_operators(&mesh.ops.laplacian, mass, kind)
         .with_context(|| format!("{kind} sampler on the {} mesh", mesh.label))?;
-    let theory = sampler.theory(&mesh.pairs)?;
-    let mut analyzer = SpectralAnalyzer::new(&mesh.pairs, mass)?.keep(&keep);
+    let request = SpectrumRequest {
+        samples,
+        k,
+        seed,
+        keep: keep.clone(),
+    };
     let mut energies = Vec::with_capacity(samples);
-    // the consumer times itself; the rest of the loop is sampling
-    let mut analysis_seconds = 0.0;
-    let start = Instant::now();
-    stream::for_each_chunk(&sampler, samples, 1, seed, CHUNK, |batch, _| {
-        let t = Instant::now();
-        energies.extend((0..batch.samples()).map(|s| energy(batch.sample(s), mass)));
-        analyzer.add(batch)?;
-        analysis_seconds += t.elapsed().as_secs_f64();
-        Ok(())
-    })?;
-    let sample_seconds = start.elapsed().as_secs_f64() - analysis_seconds;
-    let t = Instant::now();
-    let report = analyzer.report(Some(&theory))?;
-    analysis_seconds += t.elapsed().as_secs_f64();
+    let measured = MeshSpectrum::measure_on(
+        &mesh.label,
+        &mesh.ops,
+        &mesh.pairs,
+        &sampler,
+        &request,
+        CHUNK,
+        |batch, _| {
+            energies.extend((0..batch.samples()).map(|s| energy(batch.sample(s), mass)));
+            Ok(())
+        },
+    )?;
+    let (sample_seconds, analysis_seconds) = (measured.sample_seconds, measured.analysis_seconds);
+    let report = measured.spectrum.report;
+    let theory = report
+        .theory
+        .clone()
+        .context("internal: a measured spectrum has its theory")?;
 
     let full = k == mesh.vertices;
     let energy = energy_of(
         &energies,
         if full {
-            Some(theory.variance.iter().sum())
+            Some(theory.iter().sum())
         } else {
-            theory.energy
+            report.theory_energy
         },
     );
     let kept_stats = keep
@@ -180,18 +188,10 @@ pub fn sample_and_analyze(
             index: i,
             eigenvalue: report.eigenvalues[i],
             std: report.variance[i].sqrt(),
-            theory_std: theory.variance[i].sqrt(),
+            theory_std: theory[i].sqrt(),
         })
         .collect();
-    let coefficients = keep
-        .iter()
-        .map(|&i| {
-            analyzer
-                .coefficients(i)
-                .map(<[f64]>::to_vec)
-                .unwrap_or_default()
-        })
-        .collect();
+    let coefficients = measured.kept.into_iter().map(|(_, c)| c).collect();
     let first_64 = report.ratio.as_ref().map(|r| {
         r.iter()
             .take(64)
@@ -223,7 +223,7 @@ pub fn sample_and_analyze(
         per_frequency: PerFrequency {
             eigenvalues: report.eigenvalues.clone(),
             variance: report.variance.clone(),
-            theory: theory.variance.clone(),
+            theory,
         },
         report,
         coefficients,
