@@ -92,7 +92,8 @@ fn parse_report(text: &str) -> Result<RunTimes> {
     })
 }
 
-fn median(xs: &[f64]) -> f64 {
+/// The median of a sample (`NaN` when empty).
+pub(crate) fn median(xs: &[f64]) -> f64 {
     let mut v = xs.to_vec();
     v.sort_by(f64::total_cmp);
     match v.len() {
@@ -104,7 +105,7 @@ fn median(xs: &[f64]) -> f64 {
 
 /// `median [min-max]` of a sample, scaled by `unit` and printed with
 /// `decimals`.
-fn spread(xs: &[f64], unit: f64, decimals: usize) -> String {
+pub(crate) fn spread(xs: &[f64], unit: f64, decimals: usize) -> String {
     let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     format!(
@@ -117,7 +118,7 @@ fn spread(xs: &[f64], unit: f64, decimals: usize) -> String {
 }
 
 /// Per-round ratios `b / a`, paired by round.
-fn paired_ratios(a: &[f64], b: &[f64]) -> Vec<f64> {
+pub(crate) fn paired_ratios(a: &[f64], b: &[f64]) -> Vec<f64> {
     a.iter().zip(b).map(|(x, y)| y / x).collect()
 }
 

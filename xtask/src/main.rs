@@ -25,6 +25,7 @@ mod bench;
 mod bench_import;
 mod bench_net;
 mod bench_noise;
+mod bench_train;
 mod no_network;
 mod python_package;
 mod visual_check;
@@ -177,6 +178,25 @@ enum BenchCmd {
     /// `mfm dataset import` of many shapes: seconds and peak memory for a
     /// folder of mesh files and for one .npy array of the same shapes.
     Import(bench_import::ImportBenchArgs),
+    /// `mfm train`'s seconds per step (the whole training loop) at the
+    /// `cpu` and `cpu-deform` presets on generated datasets, in rounds and,
+    /// with `--baseline`, interleaved with another `mfm` binary, whose
+    /// final models are compared byte for byte.
+    Train {
+        /// Comma-separated presets.
+        #[arg(long, default_value = "cpu,cpu-deform")]
+        presets: String,
+        /// Rounds; each trains every preset once per binary.
+        #[arg(long, default_value_t = 3)]
+        rounds: usize,
+        /// Training steps per run.
+        #[arg(long, default_value_t = 150)]
+        steps: u64,
+        /// Another `mfm` binary (e.g. built from an older commit) to
+        /// interleave with.
+        #[arg(long)]
+        baseline: Option<PathBuf>,
+    },
 }
 
 fn main() -> Result<()> {
@@ -284,6 +304,25 @@ fn main() -> Result<()> {
                     tau,
                     runs,
                 },
+            )
+        }
+        Cmd::Bench(BenchCmd::Train {
+            presets,
+            rounds,
+            steps,
+            baseline,
+        }) => {
+            let env = pyenv::ensure()?;
+            let exe = mfm_reproduce::mfm::build_release(&env)?;
+            bench_train::train_steps(
+                &exe,
+                &bench_train::TrainBench {
+                    presets: &presets,
+                    rounds,
+                    steps,
+                    baseline: baseline.as_deref(),
+                },
+                &bench_train::output_dir(),
             )
         }
         Cmd::Bench(BenchCmd::Net {

@@ -305,7 +305,7 @@ pub fn train(
     let sources = SourceSet::new(&template, config.noise)?;
     let schedule = &config.schedule;
     let (batch, sigma) = (schedule.batch, config.sigma as f32);
-    let device = Device::Cpu;
+    let device = schedule.device.resolve()?;
     let mut eigen_cache: HashMap<usize, Tensor> = HashMap::new();
     let run = start_or_resume(
         run_dir,
@@ -353,7 +353,10 @@ pub fn train(
                 .sample_range_f32(item, 1, 3, schedule.seed)?
                 .into_data();
             let v = template.num_vertices() as i64;
-            let x0 = Tensor::from_slice(&noise).reshape([1, v, 3]) * f64::from(sigma);
+            let x0 = Tensor::from_slice(&noise)
+                .reshape([1, v, 3])
+                .to_device(device)
+                * f64::from(sigma);
             let x0 = ctx.tensors.remove_mass_mean(&x0)?;
             let x1 = ctx
                 .tensors

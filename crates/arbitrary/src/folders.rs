@@ -39,6 +39,8 @@ pub struct FreshRun {
     pub steps: Option<u64>,
     /// Seed instead of the preset's.
     pub seed: Option<u64>,
+    /// Where the network trains, instead of the configuration's.
+    pub device: Option<mfm_fm::device::DeviceChoice>,
     /// The pairs dataset (`mfm dataset pairs` OUT/train).
     pub dataset: PathBuf,
     /// The finished predictor run (the flow only).
@@ -158,6 +160,7 @@ impl TrainingRun {
                 };
                 c.schedule.steps = f.steps.unwrap_or(c.schedule.steps);
                 c.schedule.seed = f.seed.unwrap_or(c.schedule.seed);
+                c.schedule.device = f.device.unwrap_or(c.schedule.device);
                 Plan::Predictor(c, dataset)
             }
             RunKind::Flow => {
@@ -168,6 +171,7 @@ impl TrainingRun {
                 c.eigenvectors = f.eigenvectors;
                 c.schedule.steps = f.steps.unwrap_or(c.schedule.steps);
                 c.schedule.seed = f.seed.unwrap_or(c.schedule.seed);
+                c.schedule.device = f.device.unwrap_or(c.schedule.device);
                 let predictor = f.predictor.as_deref().ok_or_else(|| {
                     ArbitraryError::RunFolder(
                         "the arbitrary-source flow needs a finished predictor run".into(),

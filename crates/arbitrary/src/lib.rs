@@ -14,6 +14,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use mfm_fm::device::DeviceChoice;
 use mfm_train::LrSchedule;
 use mfm_train::checkpoint::WEIGHTS_FILE;
 
@@ -79,6 +80,15 @@ pub struct Schedule {
         skip_serializing_if = "is_default_log_every"
     )]
     pub log_every: u64,
+    /// Where the network trains (default `auto`: the first CUDA device when
+    /// libtorch sees one, else the CPU); the sources' operators and solves
+    /// stay on the CPU, as for the flow.
+    #[serde(default, skip_serializing_if = "is_auto")]
+    pub device: DeviceChoice,
+}
+
+fn is_auto(d: &DeviceChoice) -> bool {
+    *d == DeviceChoice::Auto
 }
 
 fn default_beta1() -> f64 {
@@ -148,6 +158,7 @@ impl Schedule {
             keep_checkpoints: default_keep(),
             keep_at: Vec::new(),
             log_every: default_log_every(),
+            device: DeviceChoice::Auto,
         }
     }
 

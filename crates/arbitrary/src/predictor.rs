@@ -265,7 +265,7 @@ pub fn train(
         mfm_files::write_json(&spec_path, &spec)?;
         basis.vectors
     };
-    let device = Device::Cpu;
+    let device = config.schedule.device.resolve()?;
     let k = config.eigenvectors as i64;
     let v = template.num_vertices() as i64;
     let target = Tensor::from_slice(&targets.iter().map(|&x| x as f32).collect::<Vec<_>>())
@@ -361,13 +361,15 @@ impl EigenPredictor {
     }
 
     /// The prediction `[1, V, k]` for positions `x: [1, V, 3]` (already in
-    /// the source's frame) on `mesh`'s tensors, without gradients.
+    /// the source's frame) on `mesh`'s tensors, without gradients, on the
+    /// device of `x` (the predictor runs on its own).
     ///
     /// # Errors
     /// Shape errors of the network.
     pub fn predict_tensor(&self, mesh: &MeshTensors, x: &Tensor) -> Result<Tensor> {
-        let out = tch::no_grad(|| self.net.forward(mesh, x, None))?;
-        Ok(out.vertex.detach())
+        let on_net = x.to_device(self.net.device());
+        let out = tch::no_grad(|| self.net.forward(mesh, &on_net, None))?;
+        Ok(out.vertex.detach().to_device(x.device()))
     }
 
     /// The prediction on `mesh` (any triangulation; moved into the

@@ -32,6 +32,7 @@ pub const RESUMABLE_SPEC_FIELDS: &[&str] = &[
     "config.schedule.checkpoint_every",
     "config.schedule.keep_checkpoints",
     "config.schedule.keep_at",
+    "config.schedule.device",
     "dataset",
 ];
 

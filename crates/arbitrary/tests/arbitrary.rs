@@ -338,3 +338,66 @@ fn a_predictor_run_has_every_feature_of_the_training_loop() {
         "{e}"
     );
 }
+
+/// Both arbitrary-source trainings on a CUDA device against the same runs
+/// on the CPU: the per-step losses agree up to f32 round-off grown over a
+/// few Adam steps (a wrong device path gives differences of order one).
+/// Skips, with a note, when libtorch sees no GPU.
+#[test]
+fn both_trainings_run_on_a_gpu_as_on_the_cpu() {
+    use mfm_fm::device::DeviceChoice;
+    if !tch::Cuda::is_available() {
+        eprintln!("skipped: libtorch sees no CUDA device");
+        return;
+    }
+    let t = toy();
+    let dir = tempfile::tempdir().unwrap();
+    let train = write(&t, &dir.path().join("train"), &t.meshes.coarse, 1, 2);
+    let stop = AtomicBool::new(false);
+    let losses = |run: &Path| -> Vec<f64> {
+        std::fs::read_to_string(run.join("train_log.csv"))
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(1).unwrap().parse().unwrap())
+            .collect()
+    };
+    let close = |a: &[f64], b: &[f64], what: &str| {
+        assert_eq!(a.len(), b.len(), "{what}");
+        for (x, y) in a.iter().zip(b) {
+            assert!(
+                (x - y).abs() <= 1e-3 * y.abs().max(1e-6),
+                "{what}: {a:?} vs {b:?}"
+            );
+        }
+    };
+    let mut runs = Vec::new();
+    for device in [DeviceChoice::Cpu, DeviceChoice::Cuda] {
+        let mut p = tiny_predictor();
+        p.schedule.log_every = 1;
+        p.schedule.device = device;
+        let pred = dir.path().join(format!("pred-{device:?}"));
+        predictor::train(&pred, train.dir(), &p, &stop, false).unwrap();
+        let mut f = tiny_flow();
+        f.schedule.log_every = 1;
+        f.schedule.device = device;
+        let arb = dir.path().join(format!("arb-{device:?}"));
+        flow::train(&arb, train.dir(), &pred, &f, &stop, false).unwrap();
+        runs.push((pred, arb));
+    }
+    close(&losses(&runs[1].0), &losses(&runs[0].0), "predictor");
+    close(&losses(&runs[1].1), &losses(&runs[0].1), "flow");
+}
+
+/// The schedule's device is part of a run's description only when it is
+/// not the default (`auto`), and a CPU run says so.
+#[test]
+fn a_run_on_the_cpu_records_its_device() {
+    let mut c = tiny_predictor();
+    assert!(!serde_json::to_string(&c).unwrap().contains("device"));
+    c.schedule.device = mfm_fm::device::DeviceChoice::Cpu;
+    let json = serde_json::to_string(&c).unwrap();
+    assert!(json.contains("\"device\":\"cpu\""), "{json}");
+    let back: PredictorConfig = serde_json::from_str(&json).unwrap();
+    assert_eq!(back, c);
+}

@@ -19,8 +19,10 @@ use std::sync::atomic::AtomicBool;
 /// Runs `mfm train --mode predictor|arbitrary`; returns whether `stop`
 /// ended it (the caller exits with 130).
 pub fn train(a: &TrainArgs, kind: RunKind, stop: &AtomicBool) -> Result<bool> {
-    if a.noise.is_some() || a.device.is_some() {
-        bail!("--noise and --device are options of --mode flow");
+    if a.noise.is_some() {
+        bail!(
+            "--noise is an option of --mode flow (the arbitrary-source flow's noise is its configuration's)"
+        );
     }
     if kind == RunKind::Predictor && (a.predictor.is_some() || a.no_eigenvectors) {
         bail!("--predictor and --no-eigenvectors are options of --mode arbitrary");
@@ -31,10 +33,11 @@ pub fn train(a: &TrainArgs, kind: RunKind, stop: &AtomicBool) -> Result<bool> {
             || a.config.is_some()
             || a.seed.is_some()
             || a.steps.is_some()
+            || a.device.is_some()
             || a.no_eigenvectors
         {
             bail!(
-                "--resume continues with the run's own {spec_file}; drop --config/--preset/--seed/--steps/--no-eigenvectors"
+                "--resume continues with the run's own {spec_file}; drop --config/--preset/--seed/--steps/--device/--no-eigenvectors                  (its config.schedule.steps and .device may be edited there)"
             );
         }
         if !a.out.join(spec_file).is_file() {
@@ -67,6 +70,7 @@ pub fn train(a: &TrainArgs, kind: RunKind, stop: &AtomicBool) -> Result<bool> {
         Some(FreshRun {
             preset: a.preset.clone().unwrap_or_else(|| "cpu".to_owned()),
             config: a.config.clone(),
+            device: a.device,
             steps: a.steps,
             seed: a.seed,
             dataset: need(&a.dataset, "--dataset")?,

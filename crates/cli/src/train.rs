@@ -73,6 +73,8 @@ pub struct TrainArgs {
     pub(crate) noise: Option<mfm_noise::NoiseKind>,
     /// Where to train: auto (a GPU when libtorch sees one), cpu or cuda
     /// (overrides train.device; with --resume, continues the run there).
+    /// With --mode predictor or arbitrary: the schedule's device, for a new
+    /// run.
     #[arg(long)]
     pub(crate) device: Option<DeviceChoice>,
     /// Continue the run in --out from its newest valid checkpoint.
