@@ -3,7 +3,8 @@
 //! CPU presets on generated datasets, repeated in rounds and, with
 //! `--baseline`, interleaved with another `mfm` binary; and whether the two
 //! binaries' final models are the same bytes (a change to the loop must
-//! not change a run).
+//! not change a run). The seconds are the training seconds of each run's
+//! log (its last row), so process start and set-up are not counted.
 //!
 //! The rounds and per-round ratios work as in `bench net` (this VM's speed
 //! drifts by 20-40% within minutes): each round trains every preset once
@@ -54,19 +55,31 @@ pub struct TrainBench<'a> {
     pub baseline: Option<&'a Path>,
 }
 
-/// Seconds per step from `mfm train`'s summary line, "... (T s/step) ...":
-/// the text, so that binaries of older commits can be the baseline.
-fn seconds_per_step(stdout: &str) -> Result<f64> {
-    let line = stdout
+/// Seconds per step of a finished run in `run`: the training seconds of
+/// the last row of its log (`step,loss,lr,grad_norm,seconds`, written
+/// with millisecond digits by this build and older ones alike) over its
+/// step.
+fn seconds_per_step(run: &Path) -> Result<f64> {
+    let path = run.join(mfm_files::owned::RUN_LOG);
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    let last = text
         .lines()
-        .find(|l| l.contains(" s/step)"))
-        .context("no summary line with \"s/step\" in mfm train's output")?;
-    let (before, _) = line.split_once(" s/step)").unwrap_or((line, ""));
-    let number = before.rsplit('(').next().unwrap_or("");
-    number
-        .trim()
-        .parse::<f64>()
-        .with_context(|| format!("cannot read the seconds per step in {line:?}"))
+        .skip(1)
+        .last()
+        .with_context(|| format!("{}: no rows", path.display()))?;
+    let fields: Vec<&str> = last.split(',').collect();
+    let number = |i: usize| -> Result<f64> {
+        fields
+            .get(i)
+            .and_then(|f| f.parse::<f64>().ok())
+            .with_context(|| format!("{}: unreadable row {last:?}", path.display()))
+    };
+    let (step, seconds) = (number(0)?, number(4)?);
+    if step < 1.0 {
+        bail!("{}: the last row is at step {step}", path.display());
+    }
+    Ok(seconds / step)
 }
 
 fn train(exe: &Path, preset: &str, data: &Path, steps: u64, out: &Path) -> Result<f64> {
@@ -87,7 +100,7 @@ fn train(exe: &Path, preset: &str, data: &Path, steps: u64, out: &Path) -> Resul
             String::from_utf8_lossy(&o.stderr).trim()
         );
     }
-    seconds_per_step(&String::from_utf8_lossy(&o.stdout))
+    seconds_per_step(out)
 }
 
 /// Runs the benchmark in `work` (emptied first) and prints (and writes
@@ -218,13 +231,18 @@ mod tests {
     use super::*;
 
     #[test]
-    fn reads_the_seconds_per_step_of_both_summary_forms() {
-        let new =
-            "dataset d: 4 signals\nsteps 0..150 of 150 in 21.3 s (0.142 s/step), last loss 1.55\n";
-        let old = "steps 0..150 in 18.3 s (0.122 s/step), last loss 1.55\n";
-        assert_eq!(seconds_per_step(new).unwrap(), 0.142);
-        assert_eq!(seconds_per_step(old).unwrap(), 0.122);
-        assert!(seconds_per_step("steps 0..150 in 1 s, last loss 1").is_err());
-        assert!(seconds_per_step("(fast s/step)").is_err());
+    fn the_seconds_per_step_are_the_last_log_row_s() {
+        let dir = tempfile::tempdir().unwrap();
+        let log = dir.path().join(mfm_files::owned::RUN_LOG);
+        std::fs::write(
+            &log,
+            "step,loss,lr,grad_norm,seconds\n100,1,1,1,3.100\n150,1,1,1,4.500\n",
+        )
+        .unwrap();
+        assert!((seconds_per_step(dir.path()).unwrap() - 0.03).abs() < 1e-15);
+        std::fs::write(&log, "step,loss,lr,grad_norm,seconds\n").unwrap();
+        assert!(seconds_per_step(dir.path()).is_err());
+        std::fs::write(&log, "step,loss,lr,grad_norm,seconds\n150,1,1,1,fast\n").unwrap();
+        assert!(seconds_per_step(dir.path()).is_err());
     }
 }
