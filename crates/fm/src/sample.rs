@@ -205,7 +205,9 @@ pub struct TargetMesh {
     /// Face blocks the network runs over on a very fine mesh
     /// ([`faces_per_block`]); `None` when the mesh fits one block.
     blocks: Option<Vec<MeshTensors>>,
-    noise: NoiseSampler,
+    /// `None` when the sampler starts from given noise ([`Sampler::with_start_noise`]):
+    /// its factor would go unused.
+    noise: Option<NoiseSampler>,
     xyz: Tensor,
 }
 
@@ -230,9 +232,10 @@ impl TargetMesh {
         self.blocks.as_ref().map_or(1, Vec::len)
     }
 
-    /// The noise sampler of the mesh.
-    pub fn noise_sampler(&self) -> &NoiseSampler {
-        &self.noise
+    /// The noise sampler of the mesh (`None` when it was prepared by a
+    /// sampler with starting noise, which draws none).
+    pub fn noise_sampler(&self) -> Option<&NoiseSampler> {
+        self.noise.as_ref()
     }
 
     /// Number of vertices.
@@ -497,22 +500,29 @@ impl Sampler {
     }
 
     /// Builds the operators (once, [`MeshContext`]), the noise sampler and
-    /// the network's tensors of a target mesh.
+    /// the network's tensors of a target mesh; without the noise sampler
+    /// when this sampler starts from given noise
+    /// ([`Sampler::with_start_noise`]), whose factor would go unused.
     ///
-    /// Cost: the mesh operators and two sparse factorizations.
+    /// Cost: the mesh operators and two sparse factorizations (one with
+    /// starting noise).
     ///
     /// # Errors
     /// Operator, factorization or noise errors of the mesh.
     pub fn prepare(&self, mesh: &TriMesh) -> Result<TargetMesh> {
         let framed = self.flow.frame.apply(mesh);
-        let context = MeshContext::new(&framed, self.flow.noise)?;
+        let (tensors, noise) = if self.start.is_some() {
+            (MeshTensors::new(&framed)?, None)
+        } else {
+            let context = MeshContext::new(&framed, self.flow.noise)?;
+            (context.tensors, Some(context.noise))
+        };
         let per_block = faces_per_block(self.net.config().width);
-        let blocks = (context.tensors.num_faces() > per_block)
-            .then(|| context.tensors.face_blocks(per_block));
+        let blocks = (tensors.num_faces() > per_block).then(|| tensors.face_blocks(per_block));
         Ok(TargetMesh {
-            mesh: context.tensors,
+            mesh: tensors,
             blocks,
-            noise: context.noise,
+            noise,
             xyz: positions_tensor(framed.positions(), self.net.device()),
         })
     }
@@ -756,7 +766,14 @@ impl Sampler {
                 .to_device(self.net.device());
             return Ok(x);
         }
-        let batch = target.noise.sample_range_f32(first, count, c, seed)?;
+        let sampler = target.noise.as_ref().ok_or_else(|| {
+            FmError::Config(
+                "the target mesh was prepared by a sampler with starting noise, without a noise \
+                 sampler: prepare it again with this one"
+                    .into(),
+            )
+        })?;
+        let batch = sampler.sample_range_f32(first, count, c, seed)?;
         let scale = self.flow.noise_scale as f32;
         let mut values = batch.into_data();
         if scale != 1.0 {

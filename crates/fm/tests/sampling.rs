@@ -584,6 +584,42 @@ fn noise_carried_to_a_refinement_is_the_coarse_noise_interpolated() {
     assert!(e.to_string().contains("same surface"), "{e}");
 }
 
+/// A sampler that starts from given noise prepares its targets without a
+/// noise sampler (the noise factor would go unused on a fine mesh) and
+/// gives exactly the samples of one that draws that same noise.
+#[test]
+fn starting_noise_prepares_no_noise_sampler_and_gives_the_same_samples() {
+    let mesh = procedural::icosphere(2);
+    let spec = flow(NoiseKind::Matern { tau: 10.0 }, 0.15);
+    let drawing = Sampler::new(affine_velocity_net(0.8, 0.25), spec.clone()).unwrap();
+    let opts = SampleOptions {
+        steps: 3,
+        method: OdeMethod::Midpoint,
+        batch: 2,
+    };
+    let (n, seed) = (3, 4);
+    let target = drawing.prepare(&mesh).unwrap();
+    assert!(target.noise_sampler().is_some());
+    let drawn = drawing.sample_on(&target, 0, n, seed, &opts).unwrap();
+    let noise = drawing.noise(&target, 0, n, seed).unwrap();
+    let values = Vec::<f32>::try_from(&noise.contiguous().view([-1])).unwrap();
+    let start = mfm_fm::sample::StartNoise {
+        values,
+        shape: [n, mesh.num_vertices(), drawing.flow().channels],
+    };
+    let given = Sampler::new(affine_velocity_net(0.8, 0.25), spec)
+        .unwrap()
+        .with_start_noise(start)
+        .unwrap();
+    let bare = given.prepare(&mesh).unwrap();
+    assert!(bare.noise_sampler().is_none());
+    let from_start = given.sample_on(&bare, 0, n, seed, &opts).unwrap();
+    assert_eq!(from_start.data, drawn.data);
+    // a target prepared without noise cannot draw it
+    let e = drawing.noise(&bare, 0, n, seed).unwrap_err().to_string();
+    assert!(e.contains("prepare it again"), "{e}");
+}
+
 #[test]
 fn face_blocks_give_the_same_samples() {
     let mesh = procedural::icosphere(2);
