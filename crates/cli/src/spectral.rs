@@ -59,7 +59,8 @@ impl EigsArgs {
 #[derive(Args, Clone, Debug)]
 pub struct KindArgs {
     /// Noise, as for `mfm train --noise`: matern or matern:TAU,
-    /// matern-normalized:C, matern-smooth[:TAU[:P]], white, naive,
+    /// matern-normalized:C, matern-smooth, matern-smooth:TAU or
+    /// matern-smooth:TAU:P, white, naive,
     /// explicit:K or explicit:K:TAU.
     #[arg(long, conflicts_with_all = ["kind", "tau", "c", "k_noise", "order"])]
     pub noise: Option<NoiseKind>,

@@ -177,7 +177,8 @@ fn temporary_pid(entry: &str, name: Option<&str>) -> Option<u32> {
 
 /// Removes from the folder `dir` the temporaries of `name` (of any name when
 /// `None`) that an mfm process killed outright left there: those whose PID
-/// is no longer a running process (see [`temporary_pid`] for the names).
+/// is no longer a running process (a file `.NAME.PID.N.tmp`, or a folder
+/// `.NAME.tmp-PID-N` / `.NAME.old-PID-N`).
 /// Temporaries of a live process, this one included, are left alone.
 /// Returns how many were removed.
 ///
