@@ -25,8 +25,8 @@ const RNG: &str = "every random choice of step s is a pure function of (seed, s)
 
 /// Fields of a run's description (`predictor.json`, `arbitrary.json`) that
 /// may change when it is resumed: how long it runs, how it checkpoints,
-/// and where its data now lives. Every other field shapes the model or the
-/// optimisation.
+/// where it runs and where its data now lives. Every other field shapes
+/// the model or the optimisation.
 pub const RESUMABLE_SPEC_FIELDS: &[&str] = &[
     "config.schedule.steps",
     "config.schedule.checkpoint_every",
