@@ -11,9 +11,11 @@
 //! per binary, alternating which goes first.
 
 use anyhow::{Context, Result, bail};
+use std::ffi::OsStr;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+
+use mfm_reproduce::mfm::Mfm;
 
 use crate::bench_net::{median, paired_ratios, spread};
 
@@ -82,24 +84,23 @@ fn seconds_per_step(run: &Path) -> Result<f64> {
     Ok(seconds / step)
 }
 
-fn train(exe: &Path, preset: &str, data: &Path, steps: u64, out: &Path) -> Result<f64> {
-    let o = Command::new(exe)
-        .args(["train", "--preset", preset, "--steps", &steps.to_string()])
-        .arg("--dataset")
-        .arg(data)
-        .arg("--out")
-        .arg(out)
-        .arg("--quiet")
-        .output()
-        .with_context(|| format!("cannot run {}", exe.display()))?;
-    if !o.status.success() {
-        bail!(
-            "{} train --preset {preset} failed ({}): {}",
-            exe.display(),
-            o.status,
-            String::from_utf8_lossy(&o.stderr).trim()
-        );
-    }
+/// Trains `preset` on `data` for `steps` steps into `out` with `mfm` and
+/// returns its seconds per step.
+fn train(mfm: &Mfm, preset: &str, data: &Path, steps: u64, out: &Path) -> Result<f64> {
+    let os = OsStr::new;
+    let steps = steps.to_string();
+    mfm.output(&[
+        os("train"),
+        os("--preset"),
+        os(preset),
+        os("--steps"),
+        os(&steps),
+        os("--dataset"),
+        data.as_os_str(),
+        os("--out"),
+        out.as_os_str(),
+        os("--quiet"),
+    ])?;
     seconds_per_step(out)
 }
 
@@ -126,29 +127,20 @@ pub fn train_steps(exe: &Path, bench: &TrainBench<'_>, work: &Path) -> Result<()
             .with_context(|| format!("cannot empty {}", work.display()))?;
     }
     std::fs::create_dir_all(work).with_context(|| format!("cannot create {}", work.display()))?;
+    let this = Mfm::at(exe).quiet();
     let mut data = Vec::new();
     for c in &cases {
         let out = work.join(format!("data-{}", c.preset));
-        let o = Command::new(exe)
-            .arg("dataset")
-            .args(c.dataset)
-            .arg("--out")
-            .arg(&out)
-            .output()
-            .with_context(|| format!("cannot run {}", exe.display()))?;
-        if !o.status.success() {
-            bail!(
-                "mfm dataset for {}: {}",
-                c.preset,
-                String::from_utf8_lossy(&o.stderr).trim()
-            );
-        }
+        let mut args = vec![OsStr::new("dataset")];
+        args.extend(c.dataset.iter().map(OsStr::new));
+        args.extend([OsStr::new("--out"), out.as_os_str()]);
+        this.output(&args)?;
         data.push(out.join("train"));
     }
-    let sides: Vec<(&str, &Path)> = match bench.baseline {
-        Some(b) => vec![("this build", exe), ("baseline", b)],
-        None => vec![("this build", exe)],
-    };
+    let mut sides = vec![("this build", this)];
+    if let Some(b) = bench.baseline {
+        sides.push(("baseline", Mfm::at(b).quiet()));
+    }
     // seconds[case][side]
     let mut seconds: Vec<Vec<Vec<f64>>> = cases
         .iter()
@@ -162,7 +154,7 @@ pub fn train_steps(exe: &Path, bench: &TrainBench<'_>, work: &Path) -> Result<()
             }
             for side in order {
                 let out = work.join(format!("run-{}-{side}-{round}", c.preset));
-                let t = train(sides[side].1, c.preset, &data[i], bench.steps, &out)?;
+                let t = train(&sides[side].1, c.preset, &data[i], bench.steps, &out)?;
                 eprintln!(
                     "xtask: round {}/{} {} {}: {t:.4} s/step",
                     round + 1,

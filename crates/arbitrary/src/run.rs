@@ -93,6 +93,7 @@ pub(crate) fn start_or_resume(
     let names = RunNames {
         what: what.to_owned(),
         lr_setting: "the learning rate".into(),
+        steps_setting: "config.schedule.steps".into(),
         randomness: RNG.into(),
     };
     let mut run = TrainingLoop::new(run_dir, net, schedule.loop_config(), names, device)?;

@@ -230,6 +230,7 @@ fn run_names() -> RunNames {
     RunNames {
         what: "training".into(),
         lr_setting: "train.lr".into(),
+        steps_setting: "train.steps".into(),
         randomness: RNG_DESCRIPTION.into(),
     }
 }
@@ -724,12 +725,6 @@ impl Trainer {
     /// [`FmError::Config`] for 0 or a total below the current step; I/O
     /// errors.
     pub fn set_total_steps(&mut self, steps: u64) -> Result<()> {
-        if steps == 0 || steps < self.run.step() {
-            return Err(FmError::Config(format!(
-                "train.steps must be at least 1 and at least the current step {}, found {steps}",
-                self.run.step()
-            )));
-        }
         self.run.set_total_steps(steps)?;
         self.objective.config.train.steps = steps;
         self.objective

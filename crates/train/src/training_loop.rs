@@ -118,6 +118,8 @@ pub struct RunNames {
     pub what: String,
     /// The setting to lower when the run diverges ("train.lr").
     pub lr_setting: String,
+    /// The setting of the run's total steps ("train.steps").
+    pub steps_setting: String,
     /// How the run's randomness is derived, recorded in every checkpoint.
     pub randomness: String,
 }
@@ -404,13 +406,13 @@ impl TrainingLoop {
     /// the run follows).
     ///
     /// # Errors
-    /// [`TrainError::Config`] for 0 or a total below the current step.
+    /// [`TrainError::Config`] for 0 or a total below the current step,
+    /// naming [`RunNames::steps_setting`].
     pub fn set_total_steps(&mut self, steps: u64) -> Result<()> {
         if steps == 0 || steps < self.step {
             return Err(TrainError::Config(format!(
-                "the total steps must be at least 1 and at least the current step {}, found \
-                 {steps}",
-                self.step
+                "{} must be at least 1 and at least the current step {}, found {steps}",
+                self.names.steps_setting, self.step
             )));
         }
         self.config.steps = steps;
