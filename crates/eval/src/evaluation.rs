@@ -146,9 +146,6 @@ pub struct ImportedShapes {
     pub diagonal: f64,
     /// The split's seed.
     pub seed: u64,
-    /// The real shapes' bending energies on the template, training then
-    /// held-out ([`ShapeSets::real_bending`]).
-    pub real_bending: Vec<f64>,
 }
 
 impl ImportedShapes {
@@ -167,7 +164,6 @@ impl ImportedShapes {
             samples,
             diagonal: self.diagonal,
             seed: self.seed,
-            real_bending: Some(&self.real_bending),
         }
     }
 }
@@ -288,9 +284,8 @@ fn experiment_of(dataset: &Dataset) -> Result<&Path> {
 /// The real shapes of the imported experiment `reference` belongs to (`m`
 /// its import record): the
 /// training set carried to the reference mesh by the experiment's
-/// transfer (as it is for the held-out set on the template), the
-/// template's diagonal, and the bending energies of the
-/// training and held-out shapes on the template, where they were given.
+/// transfer (as it is for the held-out set on the template) and the
+/// template's diagonal.
 fn imported_shapes(reference: &Dataset, m: &ImportManifest) -> Result<ImportedShapes> {
     let dir = experiment_of(reference)?;
     let train = Dataset::open(dir.join(mfm_data::layout::TRAIN))?;
@@ -330,11 +325,6 @@ fn imported_shapes(reference: &Dataset, m: &ImportManifest) -> Result<ImportedSh
         4,
     )?;
     let on_template_shapes = train.load_all()?;
-    let mut real_bending = shape_quality::bending_energies(train.mesh(), &on_template_shapes)?;
-    real_bending.extend(shape_quality::bending_energies(
-        holdout.mesh(),
-        &holdout.load_all()?,
-    )?);
     let diagonal = train.mesh().bounding_box_diagonal();
     let train = match &transfer {
         Some(t) => t.apply_set(&on_template_shapes)?,
@@ -344,7 +334,6 @@ fn imported_shapes(reference: &Dataset, m: &ImportManifest) -> Result<ImportedSh
         train,
         diagonal,
         seed: m.seed,
-        real_bending,
     })
 }
 

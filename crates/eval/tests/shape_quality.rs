@@ -91,7 +91,6 @@ impl Family {
             samples,
             diagonal: self.diagonal,
             seed: 3,
-            real_bending: None,
         })
     }
 
@@ -317,7 +316,6 @@ fn the_picture_shows_samples_beside_their_nearest_real_shapes() -> TestResult {
         samples: &samples,
         diagonal: f.diagonal,
         seed: 0,
-        real_bending: None,
     };
     let q = shape_quality(&sets)?;
     let path = dir.path().join("nearest.png");
@@ -343,7 +341,6 @@ fn bad_inputs_are_refused_with_the_reason() -> TestResult {
         samples,
         diagonal,
         seed: 0,
-        real_bending: None,
     };
     let d = f.diagonal;
     let config = |r: Result<ShapeQuality, DataError>, needle: &str| match r {
