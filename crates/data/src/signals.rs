@@ -302,6 +302,82 @@ impl SignalSource for FramedPositions {
     }
 }
 
+/// Position signals (3 channels) as displacements from a rest shape:
+/// every vertex `p_i` of a signal of `inner` comes out as `p_i - r_i`, with
+/// `r_i` the rest shape's vertex `i` (in the same units and frame as
+/// `inner`'s signals). What training reads for a run that generates shapes
+/// as displacements of the mesh they are sampled on
+/// (`model.displacements`); the difference is taken in `f64` and rounded
+/// once to `f32`.
+///
+/// # Example
+/// ```
+/// use std::sync::Arc;
+/// use mfm_data::signals::{Displacements, InMemorySignals, SignalSource};
+/// let shapes = InMemorySignals::new(vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0], 1, 2, 3).unwrap();
+/// let rest = vec![[1.0, 1.0, 1.0], [0.0, 0.0, 6.0]];
+/// let d = Displacements::new(Arc::new(shapes), rest).unwrap();
+/// let mut out = [0.0f32; 6];
+/// d.read_into(&[0], &mut out).unwrap();
+/// assert_eq!(out, [0.0, 1.0, 2.0, 4.0, 5.0, 0.0]);
+/// ```
+pub struct Displacements {
+    inner: std::sync::Arc<dyn SignalSource>,
+    rest: Vec<[f64; 3]>,
+}
+
+impl Displacements {
+    /// Wraps `inner`, whose signals must have 3 channels and as many
+    /// vertices as `rest`.
+    ///
+    /// # Errors
+    /// [`DataError::SizeMismatch`] when `inner` does not have 3 channels or
+    /// its vertex count is not `rest.len()`.
+    pub fn new(inner: std::sync::Arc<dyn SignalSource>, rest: Vec<[f64; 3]>) -> Result<Self> {
+        if inner.channels() != 3 {
+            return Err(DataError::SizeMismatch {
+                what: "channels of position signals".into(),
+                expected: 3,
+                found: inner.channels(),
+            });
+        }
+        if inner.num_vertices() != rest.len() {
+            return Err(DataError::SizeMismatch {
+                what: "vertices of the rest shape".into(),
+                expected: inner.num_vertices(),
+                found: rest.len(),
+            });
+        }
+        Ok(Self { inner, rest })
+    }
+}
+
+impl SignalSource for Displacements {
+    fn len(&self) -> usize {
+        self.inner.len()
+    }
+
+    fn num_vertices(&self) -> usize {
+        self.rest.len()
+    }
+
+    fn channels(&self) -> usize {
+        3
+    }
+
+    fn read_into(&self, indices: &[usize], out: &mut [f32]) -> Result<()> {
+        self.inner.read_into(indices, out)?;
+        for signal in out.chunks_exact_mut(3 * self.rest.len().max(1)) {
+            for (p, r) in signal.chunks_exact_mut(3).zip(&self.rest) {
+                for k in 0..3 {
+                    p[k] = (f64::from(p[k]) - r[k]) as f32;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {

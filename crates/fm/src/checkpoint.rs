@@ -94,6 +94,12 @@ pub struct FlowSpec {
     /// the velocity for runs written before the choice existed.
     #[serde(default, skip_serializing_if = "Prediction::is_velocity")]
     pub prediction: Prediction,
+    /// Whether the flow generates displacements of the sampled mesh
+    /// ([`ModelConfig::displacements`](crate::config::ModelConfig::displacements)):
+    /// a sample is the ODE's end plus the mesh's own vertices (in the
+    /// training frame). `false` for runs written before the choice existed.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub displacements: bool,
 }
 
 /// What a flow network predicts.
@@ -130,10 +136,10 @@ impl FlowSpec {
             sh[0],
             sh[1],
             sh[2],
-            if self.positions {
-                ", positions moved with it"
-            } else {
-                ""
+            match (self.positions, self.displacements) {
+                (true, true) => ", positions moved with it, generated as displacements of the mesh",
+                (true, false) => ", positions moved with it",
+                _ => "",
             },
             self.noise,
             self.noise_scale,
@@ -179,6 +185,12 @@ impl FlowSpec {
             return Err(FmError::format(
                 path,
                 format!("positions need 3 channels, the spec has {}", spec.channels),
+            ));
+        }
+        if spec.displacements && !spec.positions {
+            return Err(FmError::format(
+                path,
+                "displacements need position signals, the spec has positions = false",
             ));
         }
         if !(spec.noise_scale.is_finite() && spec.noise_scale > 0.0) {

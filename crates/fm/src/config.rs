@@ -28,6 +28,7 @@
 //! modulation = true
 //! condition_on_xyz = false     # condition on t only (true: source xyz and t)
 //! mean_offset = true
+//! displacements = false        # true: shapes as displacements of the sampled mesh
 //!
 //! [noise]
 //! kind = "matern:100"          # any form NoiseKind parses
@@ -201,6 +202,26 @@ pub struct ModelConfig {
     /// Needs `train.center` (the velocity offset of uncentred runs has no
     /// clean-signal form).
     pub prediction: crate::checkpoint::Prediction,
+    /// Generate shapes as displacements of the mesh they are sampled on
+    /// instead of as positions (default `false`, the paper's): training
+    /// targets are each shape minus the training mesh's vertices (in the
+    /// training frame), and a sample is the generated displacement field
+    /// plus the sampling mesh's own vertices. Any triangulation of the rest
+    /// surface carries its rest positions, so the model stays
+    /// triangulation-agnostic; the network generates how the shape moves
+    /// rather than its whole geometry. The sampling mesh must then be a
+    /// triangulation of the rest shape (as it is for conditioning on xyz).
+    /// Measured against positions with everything else the same, it is no
+    /// better on the shared horse and crane nor on the elephant's ARAP
+    /// poses (docs/BENCHMARKS.md, "Shapes as displacements"): an option
+    /// for data whose shapes stay close to their rest mesh, not a default.
+    /// Needs position signals (3 channels) and no `train.augment`.
+    #[serde(skip_serializing_if = "is_false")]
+    pub displacements: bool,
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
 }
 
 /// Largest loss weight `1 / (1 - t)^2` of clean-signal prediction
@@ -219,6 +240,7 @@ impl Default for ModelConfig {
             condition_on_xyz: false,
             mean_offset: true,
             prediction: crate::checkpoint::Prediction::Velocity,
+            displacements: false,
         }
     }
 }
@@ -664,6 +686,17 @@ impl RunConfig {
         if self.model.prediction == crate::checkpoint::Prediction::Clean && !t.center {
             return Err(FmError::Config(
                 "model.prediction = \"clean\" needs train.center = true".into(),
+            ));
+        }
+        if self.model.displacements && t.augment.is_active() {
+            return Err(FmError::Config(
+                "model.displacements = true cannot be combined with train.augment (a scaled or shifted shape is no displacement of the rest mesh)".into(),
+            ));
+        }
+        if self.model.displacements && self.dataset.positions == Some(false) {
+            return Err(FmError::Config(
+                "model.displacements = true needs position signals; dataset.positions is false"
+                    .into(),
             ));
         }
         // sizes and head/channel consistency (with one channel as a stand-in)

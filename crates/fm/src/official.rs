@@ -422,6 +422,7 @@ impl OfficialConfig {
             centered: self.center,
             training_surface: Some(SurfaceSize::of(template)),
             prediction: Prediction::Velocity,
+            displacements: false,
         })
     }
 
@@ -793,6 +794,12 @@ pub fn import_official(
 /// official model does not have; the file's errors.
 pub fn export_official(run: &Path, out: &Path) -> Result<usize> {
     checkpoint::verify_final_model(run)?;
+    if FlowSpec::read(run.join(FLOW_FILE))?.displacements {
+        return Err(FmError::Config(format!(
+            "{}: this run generates displacements of the sampled mesh (model.displacements); the official Matern_FM model generates positions",
+            run.display()
+        )));
+    }
     let net = PoissonNet::load(run.join(WEIGHTS_FILE), tch::Device::Cpu)?;
     let cfg = net.config();
     if cfg.head != HeadKind::Njf || cfg.in_channels != 3 {

@@ -615,7 +615,10 @@ impl Sampler {
             let t0 = Instant::now();
             let x0 = self.noise(target, first + done, b, seed)?;
             noise_seconds += t0.elapsed().as_secs_f64();
-            let x1 = self.finish(&self.integrate_reporting(target, &x0, options, &|| on_step(b))?);
+            let x1 = self.finish(
+                target,
+                &self.integrate_reporting(target, &x0, options, &|| on_step(b))?,
+            );
             let flat = x1.to_device(Device::Cpu).contiguous().view([-1]);
             let values = Vec::<f32>::try_from(&flat)?;
             data.extend_from_slice(&values);
@@ -714,15 +717,20 @@ impl Sampler {
         })
     }
 
-    /// The end of the ODE (`[B, V, C]`, in the training frame) as samples
-    /// in the target's units: plus the dataset mean for a centred run, then,
-    /// for positions, through the inverse of the frame.
-    pub fn finish(&self, x: &Tensor) -> Tensor {
+    /// The end of the ODE on `target` (`[B, V, C]`, in the training frame)
+    /// as samples in the target's units: plus the dataset mean for a centred
+    /// run, plus the target's own vertices for a run that generates
+    /// displacements ([`FlowSpec::displacements`]), then, for positions,
+    /// through the inverse of the frame.
+    pub fn finish(&self, target: &TargetMesh, x: &Tensor) -> Tensor {
         let mut x = x.shallow_clone();
         if self.flow.centered
             && let Some(o) = &self.offset
         {
             x = &x + o;
+        }
+        if self.flow.displacements {
+            x = &x + &target.xyz;
         }
         let frame = self.flow.frame;
         if self.flow.positions && !frame.is_identity() {

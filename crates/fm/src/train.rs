@@ -94,7 +94,7 @@ use crate::device::DeviceChoice;
 use crate::error::{FmError, Result};
 use crate::path::rectified_path;
 use crate::sample::{conditioning, offset_tensor};
-use mfm_data::signals::{FramedPositions, SignalSource};
+use mfm_data::signals::{Displacements, FramedPositions, SignalSource};
 
 /// Description of the randomness recorded in every checkpoint.
 const RNG_DESCRIPTION: &str = "ChaCha8 streams keyed by (seed, purpose), stream = step or epoch; \
@@ -351,6 +351,7 @@ fn resolve_flow(
         centered: config.train.center,
         training_surface: Some(frame.size),
         prediction: config.model.prediction,
+        displacements: config.model.displacements,
     })
 }
 
@@ -376,6 +377,11 @@ impl TrainingFrame {
                 "dataset.positions = true needs 3-channel signals, the dataset has {channels}"
             )));
         }
+        if config.model.displacements && !positions {
+            return Err(FmError::Config(format!(
+                "model.displacements = true needs position signals (3 channels, dataset.positions not false); the dataset has {channels} channel(s) of values"
+            )));
+        }
         Ok(Self {
             frame,
             positions,
@@ -385,20 +391,24 @@ impl TrainingFrame {
 }
 
 /// The training mesh and signals in `frame` (signals move only when they
-/// are `positions`).
+/// are `positions`), as displacements of the framed mesh when the flow
+/// generates those.
 fn in_frame(
     frame: CanonicalFrame,
     positions: bool,
+    displacements: bool,
     mesh: &TriMesh,
     signals: Arc<dyn SignalSource>,
 ) -> Result<(TriMesh, Arc<dyn SignalSource>)> {
     let framed = frame.apply(mesh);
+    let mut s = signals;
     if positions && !frame.is_identity() {
-        let s: Arc<dyn SignalSource> = Arc::new(FramedPositions::new(signals, frame)?);
-        Ok((framed, s))
-    } else {
-        Ok((framed, signals))
+        s = Arc::new(FramedPositions::new(s, frame)?);
     }
+    if displacements {
+        s = Arc::new(Displacements::new(s, framed.positions().to_vec())?);
+    }
+    Ok((framed, s))
 }
 
 /// Fields of a run's configuration that may change when it is resumed:
@@ -506,7 +516,13 @@ impl Trainer {
         mesh: &TriMesh,
         signals: Arc<dyn SignalSource>,
     ) -> Result<Self> {
-        let (framed_mesh, framed_signals) = in_frame(frame.frame, frame.positions, mesh, signals)?;
+        let (framed_mesh, framed_signals) = in_frame(
+            frame.frame,
+            frame.positions,
+            config.model.displacements,
+            mesh,
+            signals,
+        )?;
         let context = MeshContext::new(&framed_mesh, config.noise.kind)?;
         let flow = resolve_flow(&config, &context.noise, framed_signals.as_ref(), frame)?;
         flow.write(run_dir.join(FLOW_FILE))?;
@@ -609,7 +625,13 @@ impl Trainer {
                 found: signals.channels(),
             });
         }
-        let (framed_mesh, framed_signals) = in_frame(flow.frame, flow.positions, mesh, signals)?;
+        let (framed_mesh, framed_signals) = in_frame(
+            flow.frame,
+            flow.positions,
+            flow.displacements,
+            mesh,
+            signals,
+        )?;
         let context = MeshContext::new(&framed_mesh, config.noise.kind)?;
         let mut t = Self::build(run_dir, config, flow, &framed_mesh, framed_signals, context)?;
         t.run.resume_from(&info.dir, &state)?;

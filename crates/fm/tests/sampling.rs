@@ -210,6 +210,7 @@ fn flow(noise: NoiseKind, offset: f64) -> FlowSpec {
         centered: false,
         training_surface: None,
         prediction: Default::default(),
+        displacements: false,
     }
 }
 
@@ -648,4 +649,107 @@ fn face_blocks_give_the_same_samples() {
         .fold(0.0f32, f32::max);
     assert!(worst < 1e-5, "{worst}");
     assert_eq!(mfm_fm::sample::faces_per_block(32), 262_144);
+}
+
+/// A run that generates displacements (`model.displacements`) trains on
+/// each shape minus the training mesh, and its samples are the generated
+/// field plus the vertices of whatever mesh they are sampled on: the end of
+/// an ODE that stays at zero is that mesh itself, in the dataset's units,
+/// on the training mesh and on a refinement alike.
+#[test]
+fn displacement_runs_train_on_shape_minus_mesh_and_sample_around_the_sampled_mesh() {
+    let (scale, shift) = (20.0, [100.0, -20.0, 5.0]);
+    let mesh = procedural::icosphere(1).transformed(scale, shift);
+    let v = mesh.num_vertices();
+    // shape i: the sphere with its upper half lifted by i (dataset units)
+    let lift = |i: usize, p: &[f64; 3]| if p[2] > shift[2] { i as f64 } else { 0.0 };
+    let mut data = Vec::new();
+    for i in 0..4 {
+        for p in mesh.positions() {
+            data.extend([p[0] as f32, p[1] as f32, (p[2] + lift(i, p)) as f32]);
+        }
+    }
+    let signals = Arc::new(InMemorySignals::new(data, 4, v, 3).unwrap());
+    let mut c = RunConfig::preset("cpu-deform").unwrap();
+    c.model.width = Some(8);
+    c.model.blocks = Some(1);
+    c.model.displacements = true;
+    c.train.steps = 3;
+    c.train.batch = 2;
+    c.train.threads = 1;
+    c.train.device = DeviceChoice::Cpu;
+    let run = tempfile::tempdir().unwrap();
+    let mut trainer = Trainer::new(run.path(), c.clone(), &mesh, signals.clone()).unwrap();
+    let flow = trainer.flow().clone();
+    assert!(flow.displacements && flow.positions && flow.centered);
+    // the offset is the mean displacement in the frame: the upper half's
+    // share of the area times the mean lift (1.5), scaled into the frame
+    let mass = mfm_geometry::operators::lumped_mass(&mesh);
+    let area: f64 = mass.iter().sum();
+    let upper: f64 = mesh
+        .positions()
+        .iter()
+        .zip(&mass)
+        .filter(|(p, _)| p[2] > shift[2])
+        .map(|(_, m)| m)
+        .sum();
+    let want = 1.5 * upper / area * flow.frame.scale;
+    assert!(flow.velocity_offset[0].abs() < 1e-6, "{flow:?}");
+    assert!(flow.velocity_offset[1].abs() < 1e-6, "{flow:?}");
+    assert!(
+        (flow.velocity_offset[2] - want).abs() < 1e-6,
+        "{} vs {want}",
+        flow.velocity_offset[2]
+    );
+    // the flag is written only when set: flow.json of other runs is unchanged
+    let text = std::fs::read_to_string(run.path().join(checkpoint::FLOW_FILE)).unwrap();
+    assert!(text.contains("\"displacements\": true"), "{text}");
+    trainer.run(&AtomicBool::new(false), false).unwrap();
+    let positions_run = tempfile::tempdir().unwrap();
+    let mut p = c.clone();
+    p.model.displacements = false;
+    p.train.steps = 1;
+    Trainer::new(positions_run.path(), p, &mesh, signals.clone())
+        .unwrap()
+        .run(&AtomicBool::new(false), false)
+        .unwrap();
+    let text = std::fs::read_to_string(positions_run.path().join(checkpoint::FLOW_FILE)).unwrap();
+    assert!(!text.contains("displacements"), "{text}");
+
+    // the ODE's end as samples: zero -> the sampled mesh; d -> mesh + d / s
+    let sampler = Sampler::load(run.path(), Some(Device::Cpu)).unwrap();
+    assert!(sampler.flow().displacements);
+    let fine = mfm_geometry::subdivide::midpoint(&mesh).unwrap();
+    for m in [&mesh, &fine] {
+        let target = sampler.prepare(m).unwrap();
+        let n = m.num_vertices() as i64;
+        let offset: Vec<f32> = flow.velocity_offset.iter().map(|&x| x as f32).collect();
+        let offset = Tensor::from_slice(&offset).reshape([1, 1, 3]);
+        let ends = [
+            Tensor::zeros([1, n, 3], (tch::Kind::Float, Device::Cpu)) - &offset,
+            Tensor::full([1, n, 3], 0.25, (tch::Kind::Float, Device::Cpu)) - &offset,
+        ];
+        for (end, d) in ends.iter().zip([0.0, 0.25]) {
+            let x = values(&sampler.finish(&target, end));
+            for (vi, p) in m.positions().iter().enumerate() {
+                for k in 0..3 {
+                    let want = p[k] + d / flow.frame.scale;
+                    assert!(
+                        (x[3 * vi + k] - want).abs() < 1e-4 * scale,
+                        "vertex {vi} axis {k}: {} vs {want}",
+                        x[3 * vi + k]
+                    );
+                }
+            }
+        }
+    }
+    // and it samples on the refinement
+    let opts = SampleOptions {
+        steps: 2,
+        method: OdeMethod::Midpoint,
+        batch: 2,
+    };
+    let s = sampler.sample(&fine, 2, 3, &opts).unwrap();
+    assert_eq!(s.data.len(), 2 * fine.num_vertices() * 3);
+    assert!(s.data.iter().all(|x| x.is_finite()));
 }

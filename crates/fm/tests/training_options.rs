@@ -323,3 +323,69 @@ proptest! {
         prop_assert!((median - expected).abs() < 0.03, "median {median} vs {expected}");
     }
 }
+
+/// `model.displacements`: a run resumes bit for bit, trains other weights
+/// than the same run on positions, and is refused with augmentation or on
+/// signals that are not positions.
+#[test]
+fn displacement_runs_resume_bit_for_bit_and_refuse_what_is_no_shape() {
+    let mesh = procedural::icosphere(1);
+    let v = mesh.num_vertices();
+    let mut data = Vec::with_capacity(4 * v * 3);
+    for i in 0..4 {
+        let a = 0.1 * (1.0 + i as f64);
+        for p in mesh.positions() {
+            data.extend([p[0], p[1] * (1.0 + a), p[2] + a * p[0] * p[0]].map(|x| x as f32));
+        }
+    }
+    let s = Arc::new(InMemorySignals::new(data, 4, v, 3).unwrap());
+    let mut cfg = tiny(8);
+    cfg.model.condition_on_xyz = true;
+    let positions = tempfile::tempdir().unwrap();
+    train(positions.path(), cfg.clone(), &mesh, s.clone(), 8);
+    cfg.model.displacements = true;
+    let full = tempfile::tempdir().unwrap();
+    train(full.path(), cfg.clone(), &mesh, s.clone(), 8);
+    let w = bits(&weights(&full.path().join(WEIGHTS_FILE)));
+    assert_ne!(w, bits(&weights(&positions.path().join(WEIGHTS_FILE))));
+    let stopped = tempfile::tempdir().unwrap();
+    train(stopped.path(), cfg.clone(), &mesh, s.clone(), 5);
+    Trainer::resume(stopped.path(), &mesh, s.clone())
+        .unwrap()
+        .run(&AtomicBool::new(false), false)
+        .unwrap();
+    assert_eq!(bits(&weights(&stopped.path().join(WEIGHTS_FILE))), w);
+    assert!(!mfm_fm::train::RESUMABLE_FIELDS.contains(&"model.displacements"));
+
+    let mut augmented = cfg.clone();
+    augmented.train.augment.scale = 0.1;
+    let e = augmented.validate().unwrap_err().to_string();
+    assert!(
+        e.contains("model.displacements") && e.contains("train.augment"),
+        "{e}"
+    );
+    let mut values = cfg.clone();
+    values.dataset.positions = Some(false);
+    let e = values.validate().unwrap_err().to_string();
+    assert!(e.contains("position signals"), "{e}");
+    // one channel of values is no shape either
+    let d = tempfile::tempdir().unwrap();
+    let e = Trainer::new(d.path(), cfg, &mesh, signals(&mesh, 3))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("model.displacements") && e.contains("1 channel"),
+        "{e}"
+    );
+    // the field reads from TOML and is written only when set
+    let c = RunConfig::from_toml_str("[model]\ndisplacements = true\n", "t.toml").unwrap();
+    assert!(c.model.displacements);
+    assert!(c.to_toml_string().unwrap().contains("displacements = true"));
+    assert!(
+        !RunConfig::default()
+            .to_toml_string()
+            .unwrap()
+            .contains("displacements")
+    );
+}
