@@ -77,8 +77,11 @@ fn magnitude_nonlinearity_matches_reference_in_value_and_gradient() {
             .sin()
             .sum(Kind::Double)
     };
+    // unseeded draws: the central difference's round-off at h = 1e-6 on
+    // this sum of 72 sines reached 1.09e-7 once (a wrong gradient reads
+    // 1e-2 and more; the reference comparison above is to 1e-12)
     let err = check_directional(&[randn(&[2, 2 * 9, 4]), randn(&[4])], &f, 3, 1e-6);
-    assert!(err < 1e-7, "FD {err}");
+    assert!(err < 1e-6, "FD {err}");
     // the eps keeps a zero vector finite
     let z = Tensor::zeros([1, 2, 3], (Kind::Double, tch::Device::Cpu)).set_requires_grad(true);
     let y = magnitude_gelu(&z, &randn(&[3])).unwrap();
