@@ -264,15 +264,21 @@ impl FramedPositions {
         inner: std::sync::Arc<dyn SignalSource>,
         frame: mfm_geometry::frame::CanonicalFrame,
     ) -> Result<Self> {
-        if inner.channels() != 3 {
-            return Err(DataError::SizeMismatch {
-                what: "channels of position signals".into(),
-                expected: 3,
-                found: inner.channels(),
-            });
-        }
+        require_positions(inner.as_ref())?;
         Ok(Self { inner, frame })
     }
+}
+
+/// [`DataError::SizeMismatch`] unless `source` has 3 channels (positions).
+fn require_positions(source: &dyn SignalSource) -> Result<()> {
+    if source.channels() != 3 {
+        return Err(DataError::SizeMismatch {
+            what: "channels of position signals".into(),
+            expected: 3,
+            found: source.channels(),
+        });
+    }
+    Ok(())
 }
 
 impl SignalSource for FramedPositions {
@@ -334,13 +340,7 @@ impl Displacements {
     /// [`DataError::SizeMismatch`] when `inner` does not have 3 channels or
     /// its vertex count is not `rest.len()`.
     pub fn new(inner: std::sync::Arc<dyn SignalSource>, rest: Vec<[f64; 3]>) -> Result<Self> {
-        if inner.channels() != 3 {
-            return Err(DataError::SizeMismatch {
-                what: "channels of position signals".into(),
-                expected: 3,
-                found: inner.channels(),
-            });
-        }
+        require_positions(inner.as_ref())?;
         if inner.num_vertices() != rest.len() {
             return Err(DataError::SizeMismatch {
                 what: "vertices of the rest shape".into(),

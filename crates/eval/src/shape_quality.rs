@@ -61,7 +61,8 @@
 //!   frames read a median of 25 times the rest shape's energy, nearly all
 //!   of it at a handful of vertices whose rest cotangent weights are huge:
 //!   the shared galloping horse does; with their own, every frame is
-//!   within 12% of the rest shape.) `0 / 0` counts as 1 and `x / 0` as infinity (`null` in JSON).
+//!   within 12% of the rest shape.) `0 / 0` counts as 1 and `x / 0` as
+//!   infinity (`null` in JSON).
 //! - **novelty** = `median_{s in S} min_{t in T} d(s, t) / floor`: near 0 for
 //!   copies of training shapes, about 1 for new shapes as far from the
 //!   training set as unseen real ones.

@@ -216,12 +216,8 @@ pub struct ModelConfig {
     /// poses (docs/BENCHMARKS.md, "Shapes as displacements"): an option
     /// for data whose shapes stay close to their rest mesh, not a default.
     /// Needs position signals (3 channels) and no `train.augment`.
-    #[serde(skip_serializing_if = "is_false")]
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub displacements: bool,
-}
-
-fn is_false(b: &bool) -> bool {
-    !*b
 }
 
 /// Largest loss weight `1 / (1 - t)^2` of clean-signal prediction

@@ -37,6 +37,20 @@ fn tiny_run(dir: &std::path::Path, channels: usize, xyz: bool) -> TriMesh {
 }
 
 /// [`tiny_run`] with `width` channels.
+/// `preset` shrunk to a W8 K1 network conditioned on xyz, 3 steps of
+/// batch 2 on one CPU thread.
+fn three_step_xyz_config(preset: &str) -> RunConfig {
+    let mut c = RunConfig::preset(preset).unwrap();
+    c.model.width = Some(8);
+    c.model.blocks = Some(1);
+    c.model.condition_on_xyz = true;
+    c.train.steps = 3;
+    c.train.batch = 2;
+    c.train.threads = 1;
+    c.train.device = DeviceChoice::Cpu;
+    c
+}
+
 fn run_of_width(dir: &std::path::Path, channels: usize, xyz: bool, width: usize) -> TriMesh {
     let mesh = procedural::icosphere(1);
     let mut c = RunConfig::preset("cpu").unwrap();
@@ -415,14 +429,7 @@ fn position_samples_come_back_in_the_datasets_units() {
     }
     let signals = Arc::new(InMemorySignals::new(data, 4, v, 3).unwrap());
     let run = tempfile::tempdir().unwrap();
-    let mut c = RunConfig::preset("cpu").unwrap();
-    c.model.width = Some(8);
-    c.model.blocks = Some(1);
-    c.model.condition_on_xyz = true;
-    c.train.steps = 3;
-    c.train.batch = 2;
-    c.train.threads = 1;
-    c.train.device = DeviceChoice::Cpu;
+    let c = three_step_xyz_config("cpu");
     let trainer = Trainer::new(run.path(), c, &mesh, signals).unwrap();
     let flow = trainer.flow().clone();
     assert_eq!(flow.frame, CanonicalFrame::of(&mesh).unwrap());
@@ -670,14 +677,8 @@ fn displacement_runs_train_on_shape_minus_mesh_and_sample_around_the_sampled_mes
         }
     }
     let signals = Arc::new(InMemorySignals::new(data, 4, v, 3).unwrap());
-    let mut c = RunConfig::preset("cpu-deform").unwrap();
-    c.model.width = Some(8);
-    c.model.blocks = Some(1);
+    let mut c = three_step_xyz_config("cpu-deform");
     c.model.displacements = true;
-    c.train.steps = 3;
-    c.train.batch = 2;
-    c.train.threads = 1;
-    c.train.device = DeviceChoice::Cpu;
     let run = tempfile::tempdir().unwrap();
     let mut trainer = Trainer::new(run.path(), c.clone(), &mesh, signals.clone()).unwrap();
     let flow = trainer.flow().clone();

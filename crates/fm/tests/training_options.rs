@@ -76,6 +76,23 @@ fn train(dir: &Path, cfg: RunConfig, mesh: &TriMesh, s: Arc<InMemorySignals>, un
         .unwrap();
 }
 
+/// The final weights' bits of a run stopped after step `stop` and resumed
+/// to its end.
+fn stopped_and_resumed(
+    cfg: RunConfig,
+    mesh: &TriMesh,
+    s: &Arc<InMemorySignals>,
+    stop: u64,
+) -> Vec<u32> {
+    let dir = tempfile::tempdir().unwrap();
+    train(dir.path(), cfg, mesh, s.clone(), stop);
+    Trainer::resume(dir.path(), mesh, s.clone())
+        .unwrap()
+        .run(&AtomicBool::new(false), false)
+        .unwrap();
+    bits(&weights(&dir.path().join(WEIGHTS_FILE)))
+}
+
 #[test]
 fn the_weight_average_follows_its_recursion_and_resumes_bit_for_bit() {
     let mesh = procedural::icosphere(1);
@@ -127,16 +144,7 @@ fn the_weight_average_follows_its_recursion_and_resumes_bit_for_bit() {
     assert_eq!(bits(&at(12, EMA_FILE)), bits(&avg));
 
     // stopped at step 6 (off the checkpoint grid) and resumed: bit for bit
-    let stopped = tempfile::tempdir().unwrap();
-    train(stopped.path(), cfg.clone(), &mesh, s.clone(), 6);
-    Trainer::resume(stopped.path(), &mesh, s.clone())
-        .unwrap()
-        .run(&AtomicBool::new(false), false)
-        .unwrap();
-    assert_eq!(
-        bits(&weights(&stopped.path().join(WEIGHTS_FILE))),
-        bits(&avg)
-    );
+    assert_eq!(stopped_and_resumed(cfg.clone(), &mesh, &s, 6), bits(&avg));
 
     // the training itself does not depend on the average
     let mut plain = cfg.clone();
@@ -231,14 +239,8 @@ fn time_sampling_and_jacobian_weight_change_the_run_and_resume_bit_for_bit() {
             w, reference,
             "{name} trained the same weights as the default"
         );
-        let stopped = tempfile::tempdir().unwrap();
-        train(stopped.path(), cfg, &mesh, s.clone(), 5);
-        Trainer::resume(stopped.path(), &mesh, s.clone())
-            .unwrap()
-            .run(&AtomicBool::new(false), false)
-            .unwrap();
         assert_eq!(
-            bits(&weights(&stopped.path().join(WEIGHTS_FILE))),
+            stopped_and_resumed(cfg, &mesh, &s, 5),
             w,
             "{name} resumed differently"
         );
@@ -348,13 +350,7 @@ fn displacement_runs_resume_bit_for_bit_and_refuse_what_is_no_shape() {
     train(full.path(), cfg.clone(), &mesh, s.clone(), 8);
     let w = bits(&weights(&full.path().join(WEIGHTS_FILE)));
     assert_ne!(w, bits(&weights(&positions.path().join(WEIGHTS_FILE))));
-    let stopped = tempfile::tempdir().unwrap();
-    train(stopped.path(), cfg.clone(), &mesh, s.clone(), 5);
-    Trainer::resume(stopped.path(), &mesh, s.clone())
-        .unwrap()
-        .run(&AtomicBool::new(false), false)
-        .unwrap();
-    assert_eq!(bits(&weights(&stopped.path().join(WEIGHTS_FILE))), w);
+    assert_eq!(stopped_and_resumed(cfg.clone(), &mesh, &s, 5), w);
     assert!(!mfm_fm::train::RESUMABLE_FIELDS.contains(&"model.displacements"));
 
     let mut augmented = cfg.clone();
