@@ -131,7 +131,7 @@ mod tests {
             .collect();
         let shared = set.cached(1, posed.clone()).unwrap();
         assert!(Arc::ptr_eq(
-            shared.tensors.solver().factor().symbolic(),
+            shared.tensors.solver().symbolic(),
             set.symbolic()
         ));
         assert!(Arc::ptr_eq(

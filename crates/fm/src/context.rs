@@ -56,24 +56,74 @@ impl MeshContext {
         noise: NoiseKind,
         symbolic: Option<&Arc<SymbolicAnalysis>>,
     ) -> Result<Self> {
-        noise.validate()?;
-        let ops = Operators::new(mesh)?;
-        let sampler =
-            NoiseSampler::from_operators_sharing(&ops.laplacian, &ops.mass, noise, symbolic)?;
-        // L + eps I has the pattern of the noise's L + tau M: one symbolic
-        // analysis serves both factorizations
-        let shift = ShiftOptions::default();
-        let shared = symbolic.or(sampler.screened_poisson().map(|p| p.symbolic()));
-        let solver = match shared {
-            Some(s) => LaplacianSolver::with_symbolic(s, &ops.laplacian, &shift)?,
-            None => LaplacianSolver::with_options(&ops.laplacian, &shift)?,
-        };
-        let tensors = MeshTensors::from_operators(mesh.faces(), &ops, Arc::new(solver))?;
-        Ok(Self {
-            noise: sampler,
-            tensors,
-        })
+        let (tensors, sampler) = build(mesh, Some(noise), symbolic, Factors::Both)?;
+        match sampler {
+            Some(noise) => Ok(Self { noise, tensors }),
+            None => unreachable!("a noise kind was given, so a sampler was built"),
+        }
     }
+}
+
+/// What a sampler needs of one mesh: the network's tensors, and the noise
+/// sampler of `noise` (`None`: the caller brings its own starting noise and
+/// no noise factor is made). Sampling solves and draws in `f32` only, so
+/// both factors keep only their `f32` copies: on a mesh of a million
+/// vertices each `f64` factor would hold about 0.2 GB more, unused. The
+/// samples are the same bits as with [`MeshContext::new`]'s parts.
+///
+/// # Errors
+/// As [`MeshContext::new`].
+pub(crate) fn sampling_parts(
+    mesh: &TriMesh,
+    noise: Option<NoiseKind>,
+) -> Result<(MeshTensors, Option<NoiseSampler>)> {
+    build(mesh, noise, None, Factors::F32Only)
+}
+
+/// Which precisions the factors of a [`build`] keep.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Factors {
+    /// `f64`, with the `f32` copies made on first use (training, any caller).
+    Both,
+    /// The `f32` copies only (`f32` sampling).
+    F32Only,
+}
+
+/// Builds the operators of `mesh` once, then the noise sampler (for a
+/// given kind) and the mesh tensors (default shift of `L + eps I`, sharing
+/// `symbolic` or the noise factor's symbolic analysis when there is one).
+fn build(
+    mesh: &TriMesh,
+    noise: Option<NoiseKind>,
+    symbolic: Option<&Arc<SymbolicAnalysis>>,
+    factors: Factors,
+) -> Result<(MeshTensors, Option<NoiseSampler>)> {
+    if let Some(kind) = noise {
+        kind.validate()?;
+    }
+    let ops = Operators::new(mesh)?;
+    let mut sampler = noise
+        .map(|kind| NoiseSampler::from_operators_sharing(&ops.laplacian, &ops.mass, kind, symbolic))
+        .transpose()?;
+    // L + eps I has the pattern of the noise's L + tau M: one symbolic
+    // analysis serves both factorizations
+    let shift = ShiftOptions::default();
+    let noise_symbolic = sampler
+        .as_ref()
+        .and_then(|s| s.screened_poisson())
+        .map(|p| p.symbolic());
+    let mut solver = match symbolic.or(noise_symbolic) {
+        Some(s) => LaplacianSolver::with_symbolic(s, &ops.laplacian, &shift)?,
+        None => LaplacianSolver::with_options(&ops.laplacian, &shift)?,
+    };
+    if factors == Factors::F32Only {
+        solver.release_f64_factor();
+        if let Some(s) = sampler.as_mut() {
+            s.release_f64_factor();
+        }
+    }
+    let tensors = MeshTensors::from_operators(mesh.faces(), &ops, Arc::new(solver))?;
+    Ok((tensors, sampler))
 }
 
 #[cfg(test)]
@@ -90,10 +140,7 @@ mod tests {
         let ctx = MeshContext::new(&mesh, kind).unwrap();
         // the network's factor reuses the noise factor's symbolic analysis
         let noise_symbolic = ctx.noise.screened_poisson().unwrap().symbolic();
-        assert!(Arc::ptr_eq(
-            ctx.tensors.solver().factor().symbolic(),
-            noise_symbolic
-        ));
+        assert!(Arc::ptr_eq(ctx.tensors.solver().symbolic(), noise_symbolic));
         // and both halves are the same bits as when built on their own
         let separate = MeshTensors::new(&mesh).unwrap();
         let v = mesh.num_vertices() as i64;

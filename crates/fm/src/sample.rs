@@ -49,7 +49,7 @@ use mfm_train::checkpoint::{self, EMA_FILE, WEIGHTS_FILE};
 
 use crate::checkpoint::{FLOW_FILE, FlowSpec};
 use crate::config::{OdeMethod, SampleConfig};
-use crate::context::MeshContext;
+use crate::context::sampling_parts;
 use crate::device::DeviceChoice;
 use crate::error::{FmError, Result};
 use mfm_data::InMemorySignals;
@@ -499,10 +499,12 @@ impl Sampler {
         &self.net
     }
 
-    /// Builds the operators (once, [`MeshContext`]), the noise sampler and
-    /// the network's tensors of a target mesh; without the noise sampler
-    /// when this sampler starts from given noise
-    /// ([`Sampler::with_start_noise`]), whose factor would go unused.
+    /// Builds the operators (once, as [`MeshContext`](crate::context::MeshContext)
+    /// does), the noise sampler and the network's tensors of a target mesh;
+    /// without the noise sampler when this sampler starts from given noise
+    /// ([`Sampler::with_start_noise`]), whose factor would go unused. Both
+    /// factors keep only their `f32` copies, the precision sampling solves
+    /// and draws in ([`mfm_solver::LaplacianSolver::release_f64_factor`]).
     ///
     /// Cost: the mesh operators and two sparse factorizations (one with
     /// starting noise).
@@ -511,12 +513,8 @@ impl Sampler {
     /// Operator, factorization or noise errors of the mesh.
     pub fn prepare(&self, mesh: &TriMesh) -> Result<TargetMesh> {
         let framed = self.flow.frame.apply(mesh);
-        let (tensors, noise) = if self.start.is_some() {
-            (MeshTensors::new(&framed)?, None)
-        } else {
-            let context = MeshContext::new(&framed, self.flow.noise)?;
-            (context.tensors, Some(context.noise))
-        };
+        let noise = self.start.is_none().then_some(self.flow.noise);
+        let (tensors, noise) = sampling_parts(&framed, noise)?;
         let per_block = faces_per_block(self.net.config().width);
         let blocks = (tensors.num_faces() > per_block).then(|| tensors.face_blocks(per_block));
         Ok(TargetMesh {

@@ -608,6 +608,10 @@ fn starting_noise_prepares_no_noise_sampler_and_gives_the_same_samples() {
     let (n, seed) = (3, 4);
     let target = drawing.prepare(&mesh).unwrap();
     assert!(target.noise_sampler().is_some());
+    // sampling solves and draws in f32: neither factor keeps its f64 values
+    assert!(!target.mesh_tensors().solver().holds_f64_factor());
+    let noise_factor = target.noise_sampler().unwrap().screened_poisson();
+    assert!(!noise_factor.unwrap().holds_f64_factor());
     let drawn = drawing.sample_on(&target, 0, n, seed, &opts).unwrap();
     let noise = drawing.noise(&target, 0, n, seed).unwrap();
     let values = Vec::<f32>::try_from(&noise.contiguous().view([-1])).unwrap();
@@ -621,6 +625,7 @@ fn starting_noise_prepares_no_noise_sampler_and_gives_the_same_samples() {
         .unwrap();
     let bare = given.prepare(&mesh).unwrap();
     assert!(bare.noise_sampler().is_none());
+    assert!(!bare.mesh_tensors().solver().holds_f64_factor());
     let from_start = given.sample_on(&bare, 0, n, seed, &opts).unwrap();
     assert_eq!(from_start.data, drawn.data);
     // a target prepared without noise cannot draw it

@@ -512,7 +512,7 @@ impl PoissonSolveOp {
         let (items, rows, width) = (nb as usize, v as usize, c as usize);
         if work == Kind::Double {
             let data = SyncPtr(buf.data_ptr() as *mut f64);
-            solve_channels(self.solver.factor(), data, items, rows, width)?;
+            solve_channels(self.solver.factor()?, data, items, rows, width)?;
         } else {
             let data = SyncPtr(buf.data_ptr() as *mut f32);
             solve_channels(self.solver.factor_f32(), data, items, rows, width)?;

@@ -172,7 +172,7 @@ fn time_mesh(path: &str, o: &Opts) -> Res<serde_json::Value> {
         "mesh": path,
         "vertices": v,
         "faces": mesh.num_faces(),
-        "factor_len": poisson.factor().symbolic().factor_len(),
+        "factor_len": poisson.symbolic().factor_len(),
         "median_ms": median,
         "min_ms": min,
     }))

@@ -623,6 +623,29 @@ impl NoiseSampler {
         }
     }
 
+    /// Keeps only the `f32` copy of the Matérn factor, for a caller that
+    /// draws with [`NoiseSampler::sample_range_f32`] only (e.g. a sampler on
+    /// a mesh of millions of vertices, where the `f64` factor takes hundreds
+    /// of MB). Returns whether a factor was released: `false` for the kinds
+    /// whose `f32` draws are computed in `f64` (the explicit kind, Matérn
+    /// noise without screening) and for those without a factor, which keep
+    /// what they hold. After a release, the `f64` draws
+    /// ([`NoiseSampler::sample_range`]) fail with a solver error; the `f32`
+    /// draws are the same bits as before.
+    pub fn release_f64_factor(&mut self) -> bool {
+        match &mut self.engine {
+            Engine::Poisson {
+                poisson,
+                null_space: None,
+                ..
+            } => {
+                poisson.release_f64_factor();
+                true
+            }
+            _ => false,
+        }
+    }
+
     /// The closed-form statistics of this sampler's noise on its mesh, for
     /// eigenpairs `pairs` of the same mesh ([`Theory::new`] with the
     /// sampler's mass and `Gamma`; its variances are

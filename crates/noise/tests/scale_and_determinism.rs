@@ -269,3 +269,50 @@ fn f32_samples_are_bit_identical_across_thread_counts_and_batch_cuts() {
         );
     }
 }
+
+/// A sampler that keeps only the `f32` factor (a sampler on a very fine
+/// mesh) draws the same `f32` bits; the kinds whose `f32` draws need the
+/// `f64` factor keep it, and a released one refuses `f64` draws.
+#[test]
+fn releasing_the_f64_factor_keeps_f32_draws_bit_for_bit() {
+    let mesh = common::blob(2);
+    let (n, c, seed) = (7, 3, 0x5eed);
+    for (kind, releases) in [
+        (NoiseKind::Matern { tau: 100.0 }, true),
+        (NoiseKind::MaternNormalized { c: 0.01 }, true),
+        (
+            NoiseKind::MaternSmooth {
+                tau: 100.0,
+                order: 2,
+            },
+            true,
+        ),
+        (NoiseKind::Matern { tau: 0.0 }, false),
+        (NoiseKind::White, false),
+        (NoiseKind::Naive, false),
+    ] {
+        let kept = NoiseSampler::new(&mesh, kind).unwrap();
+        let mut released = NoiseSampler::new(&mesh, kind).unwrap();
+        assert_eq!(released.release_f64_factor(), releases, "{kind}");
+        assert_eq!(
+            bits32(&released.sample_f32(n, c, seed).unwrap()),
+            bits32(&kept.sample_f32(n, c, seed).unwrap()),
+            "{kind}: f32 draws after the release"
+        );
+        let f64_draw = released.sample(n, c, seed);
+        if releases {
+            let e = f64_draw.unwrap_err().to_string();
+            assert!(e.contains("only f32 solves remain"), "{kind}: {e}");
+            assert!(
+                !released.screened_poisson().unwrap().holds_f64_factor(),
+                "{kind}"
+            );
+        } else {
+            assert_eq!(
+                bits(&f64_draw.unwrap()),
+                bits(&kept.sample(n, c, seed).unwrap()),
+                "{kind}: nothing released"
+            );
+        }
+    }
+}

@@ -152,6 +152,17 @@ pub enum SolverError {
         /// The backend's message.
         message: String,
     },
+
+    /// An `f64` solve on a solver whose `f64` factor was released to save
+    /// memory (`release_f64_factor`); its `f32` solves still work.
+    #[error(
+        "the f64 factor of {what} was released to save memory; only f32 solves remain \
+         (keep the f64 factor for f64 solves)"
+    )]
+    FactorReleased {
+        /// Which operator (e.g. `"L + eps I"`).
+        what: &'static str,
+    },
 }
 
 /// Shorthand for results of this crate.

@@ -50,6 +50,64 @@ use crate::sparse::{
     check_block, check_finite_matrix, check_mass, check_positive, check_square, check_vector,
 };
 
+/// A factor held in `f64`, with its `f32` copy made on first use; once only
+/// `f32` solves remain, the `f64` values can be released
+/// ([`FactorPair::release_f64`]), which halves what the pair holds.
+///
+/// Invariant: at least one of the two is present, and the `f32` copy is
+/// made before the `f64` values go.
+#[derive(Debug)]
+struct FactorPair {
+    f64: Option<CholeskyFactor>,
+    f32: OnceLock<CholeskyFactor<f32>>,
+    /// Which operator, for [`SolverError::FactorReleased`].
+    what: &'static str,
+}
+
+impl FactorPair {
+    fn new(factor: CholeskyFactor, what: &'static str) -> Self {
+        Self {
+            f64: Some(factor),
+            f32: OnceLock::new(),
+            what,
+        }
+    }
+
+    fn f64(&self) -> Result<&CholeskyFactor> {
+        self.f64
+            .as_ref()
+            .ok_or(SolverError::FactorReleased { what: self.what })
+    }
+
+    fn f32(&self) -> &CholeskyFactor<f32> {
+        match (self.f32.get(), &self.f64) {
+            (Some(f), _) => f,
+            (None, Some(f64)) => self.f32.get_or_init(|| f64.to_f32()),
+            (None, None) => unreachable!("the f32 copy is made before the f64 factor is released"),
+        }
+    }
+
+    fn release_f64(&mut self) {
+        self.f32();
+        self.f64 = None;
+    }
+
+    fn holds_f64(&self) -> bool {
+        self.f64.is_some()
+    }
+
+    fn symbolic(&self) -> &Arc<SymbolicAnalysis> {
+        match &self.f64 {
+            Some(f) => f.symbolic(),
+            None => self.f32().symbolic(),
+        }
+    }
+
+    fn dim(&self) -> usize {
+        self.symbolic().dim()
+    }
+}
+
 /// Validated lower-triangle values of `L` on the pattern of `symbolic`.
 fn lower_values_of(symbolic: &SymbolicAnalysis, l: &SparseColMat<usize, f64>) -> Result<Vec<f64>> {
     let n = check_square(l.nrows(), l.ncols())?;
@@ -89,8 +147,7 @@ fn factor_shifted(
 /// right-hand side. `Send + Sync`: solve from many threads at once.
 #[derive(Debug)]
 pub struct ScreenedPoisson {
-    factor: CholeskyFactor,
-    factor_f32: OnceLock<CholeskyFactor<f32>>,
+    factor: FactorPair,
     lower_l: Vec<f64>,
     mass: Vec<f64>,
     tau: f64,
@@ -138,8 +195,7 @@ impl ScreenedPoisson {
             &FactorOptions::default(),
         )?;
         Ok(Self {
-            factor,
-            factor_f32: OnceLock::new(),
+            factor: FactorPair::new(factor, SCREENED),
             lower_l,
             mass: mass.to_vec(),
             tau,
@@ -151,15 +207,14 @@ impl ScreenedPoisson {
     pub fn with_tau(&self, tau: f64) -> Result<Self> {
         check_positive("tau", tau)?;
         let factor = factor_shifted(
-            self.factor.symbolic(),
+            self.symbolic(),
             &self.lower_l,
             |j| self.mass[j],
             tau,
             &FactorOptions::default(),
         )?;
         Ok(Self {
-            factor,
-            factor_f32: OnceLock::new(),
+            factor: FactorPair::new(factor, SCREENED),
             lower_l: self.lower_l.clone(),
             mass: self.mass.clone(),
             tau,
@@ -182,13 +237,31 @@ impl ScreenedPoisson {
     }
 
     /// The `f64` Cholesky factor of `L + tau M`.
-    pub fn factor(&self) -> &CholeskyFactor {
-        &self.factor
+    ///
+    /// Errors: [`SolverError::FactorReleased`] after
+    /// [`ScreenedPoisson::release_f64_factor`].
+    pub fn factor(&self) -> Result<&CholeskyFactor> {
+        self.factor.f64()
     }
 
     /// The `f32` copy of the factor (made on first use, then cached).
     pub fn factor_f32(&self) -> &CholeskyFactor<f32> {
-        self.factor_f32.get_or_init(|| self.factor.to_f32())
+        self.factor.f32()
+    }
+
+    /// Keeps only the `f32` factor (made now if it was not yet): the
+    /// memory of the `f64` values (8 bytes per factor entry) goes back, and
+    /// `f64` solves fail with [`SolverError::FactorReleased`] from then on.
+    /// For a caller that solves in `f32` only, e.g. sampling noise on a
+    /// mesh of millions of vertices.
+    pub fn release_f64_factor(&mut self) {
+        self.factor.release_f64();
+    }
+
+    /// Whether the `f64` factor is still held (`false` after
+    /// [`ScreenedPoisson::release_f64_factor`]).
+    pub fn holds_f64_factor(&self) -> bool {
+        self.factor.holds_f64()
     }
 
     /// The symbolic analysis (share it with [`ScreenedPoisson::with_symbolic`]).
@@ -198,20 +271,21 @@ impl ScreenedPoisson {
 
     /// Solves `(L + tau M) x = b` for one right-hand side.
     ///
-    /// Errors: [`SolverError::SizeMismatch`], [`SolverError::NonFinite`].
+    /// Errors: [`SolverError::SizeMismatch`], [`SolverError::NonFinite`],
+    /// [`SolverError::FactorReleased`].
     pub fn solve(&self, b: &[f64]) -> Result<Vec<f64>> {
         check_vector(b, self.dim(), "right-hand side")?;
-        self.factor.solve(b)
+        self.factor()?.solve(b)
     }
 
     /// Solves for a block `B` (`n x k`, one right-hand side per column).
     pub fn solve_many(&self, b: MatRef<'_, f64>) -> Result<Mat<f64>> {
-        self.factor.solve_many(b)
+        self.factor()?.solve_many(b)
     }
 
     /// Solves in place: `b` holds `B` on entry and `X` on return.
     pub fn solve_many_in_place(&self, b: MatMut<'_, f64>) -> Result<()> {
-        self.factor.solve_in_place(b)
+        self.factor()?.solve_in_place(b)
     }
 
     /// Solves for a block in `f32` with the `f32` factor (see
@@ -226,6 +300,10 @@ impl ScreenedPoisson {
         self.factor_f32().solve_in_place(b)
     }
 }
+
+/// The operator names of [`SolverError::FactorReleased`].
+const SCREENED: &str = "L + tau M";
+const SHIFTED: &str = "L + eps I";
 
 /// How the diagonal shift `eps` of [`LaplacianSolver`] is specified.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -273,8 +351,7 @@ impl Default for ShiftOptions {
 /// constant component is amplified by `1/eps`.
 #[derive(Debug)]
 pub struct LaplacianSolver {
-    factor: CholeskyFactor,
-    factor_f32: OnceLock<CholeskyFactor<f32>>,
+    factor: FactorPair,
     eps: f64,
     attempts: usize,
 }
@@ -350,8 +427,7 @@ impl LaplacianSolver {
             match factor_shifted(symbolic, &lower_l, |_| 1.0, eps, &opts.factor) {
                 Ok(factor) => {
                     return Ok(Self {
-                        factor,
-                        factor_f32: OnceLock::new(),
+                        factor: FactorPair::new(factor, SHIFTED),
                         eps,
                         attempts: attempt,
                     });
@@ -393,30 +469,57 @@ impl LaplacianSolver {
         self.factor.dim()
     }
 
-    /// The Cholesky factor of `L + eps I`.
-    pub fn factor(&self) -> &CholeskyFactor {
-        &self.factor
+    /// The `f64` Cholesky factor of `L + eps I`.
+    ///
+    /// Errors: [`SolverError::FactorReleased`] after
+    /// [`LaplacianSolver::release_f64_factor`].
+    pub fn factor(&self) -> Result<&CholeskyFactor> {
+        self.factor.f64()
     }
 
     /// The `f32` copy of the factor (made on first use, then cached).
     pub fn factor_f32(&self) -> &CholeskyFactor<f32> {
-        self.factor_f32.get_or_init(|| self.factor.to_f32())
+        self.factor.f32()
+    }
+
+    /// Keeps only the `f32` factor (made now if it was not yet): the
+    /// memory of the `f64` values (8 bytes per factor entry) goes back, and
+    /// `f64` solves fail with [`SolverError::FactorReleased`] from then on.
+    /// For a caller that solves in `f32` only, e.g. a network sampling on a
+    /// mesh of millions of vertices.
+    pub fn release_f64_factor(&mut self) {
+        self.factor.release_f64();
+    }
+
+    /// Whether the `f64` factor is still held (`false` after
+    /// [`LaplacianSolver::release_f64_factor`]).
+    pub fn holds_f64_factor(&self) -> bool {
+        self.factor.holds_f64()
+    }
+
+    /// The symbolic analysis of `L`'s pattern (share it with
+    /// [`LaplacianSolver::with_symbolic`]).
+    pub fn symbolic(&self) -> &Arc<SymbolicAnalysis> {
+        self.factor.symbolic()
     }
 
     /// Solves `(L + eps I) x = b`.
+    ///
+    /// Errors: [`SolverError::SizeMismatch`], [`SolverError::NonFinite`],
+    /// [`SolverError::FactorReleased`].
     pub fn solve(&self, b: &[f64]) -> Result<Vec<f64>> {
         check_vector(b, self.dim(), "right-hand side")?;
-        self.factor.solve(b)
+        self.factor()?.solve(b)
     }
 
     /// Solves for a block `B` (`n x k`, one right-hand side per column).
     pub fn solve_many(&self, b: MatRef<'_, f64>) -> Result<Mat<f64>> {
-        self.factor.solve_many(b)
+        self.factor()?.solve_many(b)
     }
 
     /// Solves in place: `b` holds `B` on entry and `X` on return.
     pub fn solve_many_in_place(&self, b: MatMut<'_, f64>) -> Result<()> {
-        self.factor.solve_in_place(b)
+        self.factor()?.solve_in_place(b)
     }
 
     /// Solves for a block in `f32` with the `f32` factor (see

@@ -183,7 +183,7 @@ fn laplacian_solver_with_a_shared_symbolic_analysis_is_the_same_factor() {
     let fresh = LaplacianSolver::with_options(&l, &opts).expect("SPD");
     // the analysis is reused, not copied, and the shift search is the same
     assert!(std::sync::Arc::ptr_eq(
-        shared.factor().symbolic(),
+        shared.symbolic(),
         screened.symbolic()
     ));
     assert_eq!(
@@ -203,7 +203,7 @@ fn laplacian_solver_with_a_shared_symbolic_analysis_is_the_same_factor() {
         common::cotan_laplacian(&p0, &f),
     );
     let first = LaplacianSolver::new(&l0).expect("SPD");
-    let posed = LaplacianSolver::with_symbolic(first.factor().symbolic(), &l1, &opts).expect("SPD");
+    let posed = LaplacianSolver::with_symbolic(first.symbolic(), &l1, &opts).expect("SPD");
     let alone = LaplacianSolver::with_options(&l1, &opts).expect("SPD");
     let b = rhs(l1.nrows(), 2, 8);
     let xp = posed.solve_many(b.as_ref()).expect("solve");
@@ -263,4 +263,59 @@ fn laplacian_solver_reports_exhaustion_with_the_last_shift() {
         LaplacianSolver::with_options(&l, &bad),
         Err(SolverError::InvalidParameter { name: "eps", .. })
     ));
+}
+
+/// `X` of an `f32` block solve, as plain values.
+fn f32_block(b: &Mat<f64>) -> Mat<f32> {
+    Mat::from_fn(b.nrows(), b.ncols(), |i, j| b[(i, j)] as f32)
+}
+
+#[test]
+fn releasing_the_f64_factor_keeps_f32_solves_bit_for_bit_and_refuses_f64_ones() {
+    let (l, m) = common::torus_operators(700);
+    let b = rhs(l.nrows(), 4, 11);
+    let b32 = f32_block(&b);
+
+    // the screened operator, its f32 copy made only by the release
+    let mut sp = ScreenedPoisson::new(&l, &m, 30.0).expect("SPD");
+    let kept = ScreenedPoisson::new(&l, &m, 30.0).expect("SPD");
+    let symbolic = std::sync::Arc::clone(sp.symbolic());
+    assert!(sp.holds_f64_factor());
+    sp.release_f64_factor();
+    assert!(!sp.holds_f64_factor());
+    let after = sp.solve_many_f32(b32.as_ref()).expect("f32 solve");
+    let before = kept.solve_many_f32(b32.as_ref()).expect("f32 solve");
+    assert_eq!(after, before);
+    assert!(after.norm_l2() > 0.0);
+    assert!(std::sync::Arc::ptr_eq(sp.symbolic(), &symbolic));
+    assert_eq!(sp.dim(), l.nrows());
+    for e in [
+        sp.solve(&vec![1.0; l.nrows()]).expect_err("released"),
+        sp.solve_many(b.as_ref()).expect_err("released"),
+        sp.factor().expect_err("released"),
+    ] {
+        assert_eq!(e, SolverError::FactorReleased { what: "L + tau M" });
+        assert!(e.to_string().contains("only f32 solves remain"), "{e}");
+    }
+    // another tau on the same analysis still factors
+    let other = sp.with_tau(5.0).expect("SPD");
+    assert!(other.holds_f64_factor());
+    assert!(other.solve_many(b.as_ref()).is_ok());
+
+    // the shifted Laplacian, its f32 copy made before the release
+    let mut ls = LaplacianSolver::new(&l).expect("SPD");
+    let before = ls.solve_many_f32(b32.as_ref()).expect("f32 solve");
+    ls.release_f64_factor();
+    ls.release_f64_factor();
+    assert!(!ls.holds_f64_factor());
+    let mut in_place = b32.clone();
+    ls.solve_many_f32_in_place(in_place.as_mut())
+        .expect("f32 solve");
+    assert_eq!(in_place, before);
+    let mut x = b.clone();
+    assert_eq!(
+        ls.solve_many_in_place(x.as_mut()).expect_err("released"),
+        SolverError::FactorReleased { what: "L + eps I" }
+    );
+    assert_eq!(x, b, "a refused solve leaves its block as it was");
 }
