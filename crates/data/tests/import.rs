@@ -286,6 +286,55 @@ fn copies_and_other_units_are_warned_about() {
     assert!(s.warnings[1].contains("7.obj") && s.warnings[1].contains("mixed units"));
 }
 
+/// A frame written again with its coordinates rounded differently is a
+/// near copy; a held-out shape whose copy is in the training set is
+/// named, since the evaluation would read a memorized shape as data-like.
+#[test]
+fn near_copies_and_held_out_copies_are_warned_about() {
+    let tmp = tempfile::tempdir().unwrap();
+    let input = tmp.path().join("frames");
+    let rest = write_sequence(&input, 6);
+    // input 6: shape 1 moved by 1e-6 of the diagonal (not the same bits)
+    let nudge = 1e-6 * rest.bounding_box_diagonal();
+    let again = shape(&rest, 1).transformed(1.0, [nudge, 0.0, 0.0]);
+    mfm_meshio::write_obj(input.join("7.obj"), &again).unwrap();
+    // input 7: shape 4 moved by 1e-2 of the diagonal, a distinct shape
+    let apart = shape(&rest, 4).transformed(1.0, [1e-2 * rest.bounding_box_diagonal(), 0.0, 0.0]);
+    mfm_meshio::write_obj(input.join("8.obj"), &apart).unwrap();
+    // every:2 holds out inputs 1, 3, 5, 7: input 1 held out, its copy 6 not
+    let s = import(
+        &mesh_files(&input),
+        &rest,
+        Holdout::Every(2),
+        None,
+        &tmp.path().join("d"),
+    )
+    .unwrap();
+    assert_eq!(s.warnings.len(), 2, "{:?}", s.warnings);
+    assert!(
+        s.warnings[0].starts_with("1 signal is a copy or near copy")
+            && s.warnings[0].contains("input 6 repeats input 1"),
+        "{:?}",
+        s.warnings
+    );
+    assert!(
+        s.warnings[1].starts_with("1 held-out signal has a copy among the training signals")
+            && s.warnings[1].contains("held-out input 1 repeats training input 6"),
+        "{:?}",
+        s.warnings
+    );
+    // without a holdout only the copy is told
+    let s = import(
+        &mesh_files(&input),
+        &rest,
+        Holdout::None,
+        None,
+        &tmp.path().join("e"),
+    )
+    .unwrap();
+    assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+}
+
 #[test]
 fn signal_arrays_and_ply_properties_import_as_channels() {
     let tmp = tempfile::tempdir().unwrap();
@@ -458,11 +507,10 @@ fn the_authors_dataset_files_read_as_shapes() {
 
 /// Writes every 4th frame of the shared sequence `name` as an OBJ folder,
 /// imports it with every 4th of those held out, and checks every
-/// training row against its frame.
-fn real_sequence_imports_frame_for_frame(name: &str) {
-    let Some(dir) = shared_data(name) else {
-        return;
-    };
+/// training row against its frame; returns the import's warnings (`None`
+/// without `../shared`).
+fn real_sequence_imports_frame_for_frame(name: &str) -> Option<Vec<String>> {
+    let dir = shared_data(name)?;
     let template = mfm_meshio::read_mesh(dir.join("template.obj")).unwrap();
     let frames = mfm_files::npy::read::<f32>(&dir.join("frames.npy")).unwrap();
     let [n, v, 3] = frames.shape[..] else {
@@ -499,16 +547,38 @@ fn real_sequence_imports_frame_for_frame(name: &str) {
             signal.name
         );
     }
+    Some(s.warnings)
 }
 
 #[test]
 fn the_horse_gallop_written_as_obj_files_imports_frame_for_frame() {
-    real_sequence_imports_frame_for_frame("horse-gallop");
+    // the gallop's 48 frames are its 24-frame cycle twice (frame k + 24
+    // is frame k to 1e-5 of the diagonal, bit for bit in 5 of them): of
+    // frames 0, 4, ..., 44 the last 6 repeat the first 6, and 3 of the
+    // held-out ones (12, 28, 44) repeat training frames (36, 4, 20)
+    let Some(warnings) = real_sequence_imports_frame_for_frame("horse-gallop") else {
+        return;
+    };
+    assert_eq!(warnings.len(), 2, "{warnings:?}");
+    assert!(
+        warnings[0].starts_with("6 signals are a copy or near copy")
+            && warnings[0].contains("input 6 repeats input 0"),
+        "{warnings:?}"
+    );
+    assert!(
+        warnings[1].starts_with("3 held-out signals have a copy among the training signals")
+            && warnings[1].contains("held-out input 3 repeats training input 9"),
+        "{warnings:?}"
+    );
 }
 
 #[test]
 fn the_crane_performance_written_as_obj_files_imports_frame_for_frame() {
-    real_sequence_imports_frame_for_frame("crane");
+    // a performance without repeats: its closest frames are 1e-3 of the
+    // diagonal apart, ten times the copies' tolerance
+    if let Some(warnings) = real_sequence_imports_frame_for_frame("crane") {
+        assert!(warnings.is_empty(), "{warnings:?}");
+    }
 }
 
 #[test]

@@ -25,10 +25,10 @@
 //! memory holds a few signals at a time, whatever their number.
 
 pub mod authors;
+pub mod copies;
 pub mod inputs;
 pub mod sources;
 
-use std::collections::HashMap;
 use std::path::Path;
 use std::time::Instant;
 
@@ -475,18 +475,22 @@ impl ImportExperiment<'_> {
             mfm_geometry::operators::lumped_mass(self.template)
         };
         let bar = progress_bar(self.progress, n, v);
-        let mut checks = SignalChecks::new(self.template, source.positions());
+        let mut checks = SignalChecks::new(self.template, source.positions(), c);
         for first in (0..n).step_by(CHUNK) {
             let indices: Vec<usize> = (first..(first + CHUNK).min(n)).collect();
-            let read: Vec<Result<Vec<f32>>> = indices
+            // a source repeated over its pairs is not a copy
+            let copies = |i: usize| !(self.pairs && i % 2 == 0);
+            let read: Vec<Result<(Vec<f32>, _)>> = indices
                 .par_iter()
-                .map(|&i| source.read(i, self.template))
+                .map(|&i| {
+                    let signal = source.read(i, self.template)?;
+                    let sketch = copies(i).then(|| checks.copies.sketch(&signal));
+                    Ok((signal, sketch))
+                })
                 .collect();
-            for (&i, signal) in indices.iter().zip(read) {
-                let signal = signal?;
-                // a source repeated over its pairs is not a copy
-                let copies = !(self.pairs && i % 2 == 0);
-                checks.check(&signal, i, &source.name(i), c, copies)?;
+            for (&i, read) in indices.iter().zip(read) {
+                let (signal, sketch) = read?;
+                checks.check(&signal, i, &source.name(i), c, sketch)?;
                 let signal = self.align.apply(self.template, &mass, &signal)?;
                 if held[i] {
                     if let (Some((holdout, on_reference)), Some((_, transfer, _, _))) =
@@ -502,7 +506,7 @@ impl ImportExperiment<'_> {
             }
         }
         bar.finish_and_clear();
-        warnings.extend(checks.warnings());
+        warnings.extend(checks.warnings(&held));
         let train = train.finish()?;
         if let Some((holdout, on_reference)) = sets {
             holdout.finish()?;
@@ -599,31 +603,34 @@ fn check_template(template: &TriMesh, name: &str) -> Result<Vec<String>> {
 struct SignalChecks {
     positions: bool,
     diagonal: f64,
-    seen: HashMap<u64, usize>,
-    copies: Vec<(usize, usize)>,
+    copies: copies::CopyFinder,
     other_units: Vec<(String, f64)>,
 }
 
 impl SignalChecks {
-    fn new(template: &TriMesh, positions: bool) -> Self {
+    fn new(template: &TriMesh, positions: bool, channels: usize) -> Self {
+        let diagonal = template.bounding_box_diagonal();
         Self {
             positions,
-            diagonal: template.bounding_box_diagonal(),
-            seen: HashMap::new(),
-            copies: Vec::new(),
+            diagonal,
+            copies: copies::CopyFinder::new(
+                template.num_vertices(),
+                channels,
+                positions.then_some(diagonal),
+            ),
             other_units: Vec::new(),
         }
     }
 
-    /// Refuses a value that is not finite; notes copies (when `copies`)
-    /// and other units.
+    /// Refuses a value that is not finite; notes the signal's sketch (when
+    /// it is searched for copies) and other units.
     fn check(
         &mut self,
         signal: &[f32],
         index: usize,
         name: &str,
         channels: usize,
-        copies: bool,
+        sketch: Option<([f64; copies::SKETCH], f64)>,
     ) -> Result<()> {
         let v = signal.len() / channels.max(1);
         if let Some((_, vertex, channel, x)) = crate::signals::first_non_finite(signal, v, channels)
@@ -640,14 +647,8 @@ impl SignalChecks {
                 ),
             ));
         }
-        if copies {
-            let hash = fnv(signal);
-            match self.seen.get(&hash) {
-                Some(&earlier) => self.copies.push((index, earlier)),
-                None => {
-                    self.seen.insert(hash, index);
-                }
-            }
+        if let Some(sketch) = sketch {
+            self.copies.push(index, sketch);
         }
         if self.positions && channels == 3 {
             let points: Vec<[f64; 3]> = signal
@@ -664,18 +665,43 @@ impl SignalChecks {
         Ok(())
     }
 
-    fn warnings(&self) -> Vec<String> {
+    /// The warnings, `held[i]` telling whether input `i` is held out.
+    fn warnings(&self, held: &[bool]) -> Vec<String> {
         let mut out = Vec::new();
-        if let Some(&(i, j)) = self.copies.first() {
+        let pairs = self.copies.pairs();
+        let scale = if self.positions {
+            "of the template's bounding-box diagonal"
+        } else {
+            "of the signals' RMS value"
+        };
+        let mut later: Vec<usize> = pairs.iter().map(|&(i, _)| i).collect();
+        later.dedup();
+        if let Some(&(i, j)) = pairs.first() {
             out.push(format!(
-                "{} signal{} identical to an earlier one (first: input {i} repeats input {j}); \
-                 copies weigh more in training",
-                self.copies.len(),
-                if self.copies.len() == 1 {
-                    " is"
-                } else {
-                    "s are"
-                }
+                "{} signal{} a copy or near copy of an earlier one (RMS vertex distance at most {} \
+                 {scale}; first: input {i} repeats input {j}); copies weigh more in training",
+                later.len(),
+                if later.len() == 1 { " is" } else { "s are" },
+                copies::COPY_TOLERANCE,
+            ));
+        }
+        let is_held = |i: usize| held.get(i).copied().unwrap_or(false);
+        let mut leaks: Vec<(usize, usize)> = pairs
+            .iter()
+            .filter(|&&(i, j)| is_held(i) != is_held(j))
+            .map(|&(i, j)| if is_held(i) { (i, j) } else { (j, i) })
+            .collect();
+        leaks.sort_unstable();
+        if let Some(&(h, t)) = leaks.first() {
+            let mut count: Vec<usize> = leaks.iter().map(|&(h, _)| h).collect();
+            count.dedup();
+            out.push(format!(
+                "{} held-out signal{} a copy among the training signals (first: held-out input {h} \
+                 repeats training input {t}): the evaluation reads a model that reproduces it as \
+                 data-like and its floor is 0 there; choose a holdout that keeps copies on one side \
+                 (for a repeated cycle, hold out within one repetition) or remove the copies",
+                count.len(),
+                if count.len() == 1 { " has" } else { "s have" },
             ));
         }
         if let Some((name, ratio)) = self.other_units.first() {
@@ -693,15 +719,6 @@ impl SignalChecks {
         }
         out
     }
-}
-
-/// The FNV-1a hash of the values' bits (copies have equal hashes).
-fn fnv(values: &[f32]) -> u64 {
-    let mut h = crate::dataset::Fnv1a::new();
-    for x in values {
-        h.feed(&x.to_bits().to_le_bytes());
-    }
-    h.finish()
 }
 
 /// The import's progress bar (hidden unless `show`).
