@@ -270,6 +270,84 @@ fn fresh_members_of_the_family_are_data_like() -> TestResult {
     Ok(())
 }
 
+/// The data's own flips: none between smooth members of the family; a
+/// held-out sheet with half of it mirrored onto the other half has that
+/// half's faces turned over, and the report gives their share.
+#[test]
+fn the_held_out_shapes_flips_are_the_datas_own() -> TestResult {
+    let f = family(1);
+    let q = f.judge(&f.held_out)?;
+    let none = q.held_out_flipped.ok_or("no data flips")?;
+    assert_eq!((none.median, none.mean, none.max), (0.0, 0.0, 0.0));
+    assert!(
+        q.summary()
+            .contains("the held-out shapes against their nearest training shapes: 0.0% median"),
+        "{}",
+        q.summary()
+    );
+    // a sheet bent by a x (1 - x) y (1 - y): held out, a = 0.15 with the
+    // half x < 1/2 mirrored onto the other (its faces turned over)
+    let grid = procedural::plane_grid(12, 12, 1.0, 1.0)?;
+    let xs = grid.positions().iter().map(|p| p[0]);
+    let (lo, hi) = xs
+        .clone()
+        .fold((f64::MAX, f64::MIN), |(l, h), x| (l.min(x), h.max(x)));
+    let mid = 0.5 * (lo + hi);
+    let half: Vec<bool> = grid.positions().iter().map(|p| p[0] < mid).collect();
+    let sheet = |a: f64, mirror: bool| -> Vec<f32> {
+        grid.positions()
+            .iter()
+            .zip(&half)
+            .flat_map(|(p, &h)| {
+                let (u, v) = ((p[0] - lo) / (hi - lo), p[1]);
+                let z = a * u * (1.0 - u) * v * (1.0 - v);
+                let x = if mirror && h { 2.0 * mid - p[0] } else { p[0] };
+                [x, p[1], z].map(|c| c as f32)
+            })
+            .collect()
+    };
+    let v = grid.num_vertices();
+    let train = InMemorySignals::new(
+        [0.0, 0.1, 0.2, 0.3].map(|a| sheet(a, false)).concat(),
+        4,
+        v,
+        3,
+    )?;
+    let held_out = InMemorySignals::new(sheet(0.15, true), 1, v, 3)?;
+    let q = shape_quality(&ShapeSets {
+        mesh: &grid,
+        train: &train,
+        held_out: &held_out,
+        samples: &train,
+        diagonal: grid.bounding_box_diagonal(),
+        seed: 3,
+    })?;
+    let flips = q.held_out_flipped.ok_or("no data flips")?;
+    let faces = grid.faces();
+    let share = |all: bool| {
+        faces
+            .iter()
+            .filter(|t| {
+                let mut inside = t.iter().map(|&i| half[i as usize]);
+                if all {
+                    inside.all(|h| h)
+                } else {
+                    inside.any(|h| h)
+                }
+            })
+            .count() as f64
+            / faces.len() as f64
+    };
+    let (in_half, touching) = (share(true), share(false));
+    assert!(
+        flips.median >= in_half && flips.max <= touching && in_half > 0.3,
+        "{flips:?}: the half holds {in_half} to {touching} of the faces"
+    );
+    // the samples (training shapes) are judged as before
+    assert_eq!(q.flipped.max, 0.0);
+    Ok(())
+}
+
 #[test]
 fn the_report_round_trips_through_json_with_stable_names() -> TestResult {
     let f = family(1);
