@@ -68,7 +68,7 @@ impl MeshContext {
 /// sampler of `noise` (`None`: the caller brings its own starting noise and
 /// no noise factor is made). Sampling solves and draws in `f32` only, so
 /// both factors keep only their `f32` copies: on a mesh of a million
-/// vertices each `f64` factor would hold about 0.2 GB more, unused. The
+/// vertices each `f64` factor would hold about 0.45 GB more, unused. The
 /// samples are the same bits as with [`MeshContext::new`]'s parts.
 ///
 /// # Errors
