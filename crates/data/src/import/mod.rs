@@ -20,7 +20,9 @@
 //! what a model trained on them generates comes back in them.
 //!
 //! Signals are streamed: each is read, checked (finite values, a bounding
-//! box like the template's, a copy of an earlier one) and appended to its
+//! box like the template's; a sketch kept for the search for copies and
+//! near copies, [`copies`], whose pairs are reported at the end, with the
+//! held-out shapes that have a copy among the training ones) and appended to its
 //! set's `signals.npy` before the next is read ([`crate::dataset::DatasetWriter`]);
 //! memory holds a few signals at a time, whatever their number.
 
