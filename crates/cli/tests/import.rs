@@ -111,6 +111,11 @@ fn imported_frames_evaluate_against_themselves() {
     assert!((q["novelty"].as_f64().unwrap() - 1.0).abs() < 1e-9, "{q}");
     assert_eq!(q["roughness"], 1.0, "{q}");
     assert_eq!(q["flipped"]["max"], 0.0);
+    // the held-out shapes as samples sit where the held-out shapes do in
+    // the training shapes' principal plane, drawn beside the picture
+    assert!(out.contains("spread "), "{out}");
+    assert_eq!(q["plane"]["samples"], q["plane"]["held_out"], "{q}");
+    assert!(d.join("m_plane.png").is_file());
     // with the template as the reference mesh, the same shapes are exactly
     // as rough as themselves
     ok(

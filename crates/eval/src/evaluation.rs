@@ -403,7 +403,8 @@ pub struct EvalFiles<'a> {
     /// beside it, and for a GMM set also `STEM_samples.png`
     /// ([`pictures::data_and_samples`]); for an imported shape set, the
     /// first samples beside their nearest real shapes
-    /// ([`pictures::nearest_real`]).
+    /// ([`pictures::nearest_real`]) and `STEM_plane.png`, every shape in
+    /// the training shapes' principal plane ([`pictures::principal_plane`]).
     pub png: Option<&'a Path>,
 }
 
@@ -458,7 +459,10 @@ impl EvalFiles<'_> {
                 e.shape_sets(&generated),
             ) {
                 (Some(p), _, _) => pictures::projections(&e.mesh, &generated, p, png)?,
-                (None, Some(q), Some(sets)) => pictures::nearest_real(&sets, q, png)?,
+                (None, Some(q), Some(sets)) => {
+                    pictures::nearest_real(&sets, q, png)?;
+                    pictures::principal_plane(q, &pictures::sibling_png(png, "plane"))?;
+                }
                 _ => pictures::means(
                     &e.mesh,
                     &generated,
@@ -542,7 +546,7 @@ impl PlausibilityFiles<'_> {
     }
 }
 
-/// The output guard of an evaluation: the JSON, the picture and the two
+/// The output guard of an evaluation: the JSON, the picture and the
 /// pictures beside it.
 fn guard(inputs: &[&Path], json: Option<&Path>, png: Option<&Path>) -> Result<mfm_files::Undo> {
     let pictures = png.into_iter().flat_map(|png| {
@@ -550,6 +554,7 @@ fn guard(inputs: &[&Path], json: Option<&Path>, png: Option<&Path>) -> Result<mf
             png.to_path_buf(),
             pictures::sibling_png(png, "samples"),
             pictures::sibling_png(png, "difference"),
+            pictures::sibling_png(png, "plane"),
         ]
     });
     let outputs = mfm_files::Outputs::new()

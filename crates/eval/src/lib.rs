@@ -5,5 +5,6 @@ pub mod evaluation;
 pub mod metrics;
 pub mod pictures;
 pub mod plausibility;
+pub mod principal_plane;
 pub mod quality;
 pub mod shape_quality;

@@ -1,7 +1,9 @@
 //! The pictures of an evaluation: data above samples with their bump-fit
 //! captions, generated shapes beside their projections, and the point-wise
 //! means with their difference. Each is one PNG grid on one colour scale,
-//! drawn with the panels of [`mfm_data::pictures`].
+//! drawn with the panels of [`mfm_data::pictures`]. For shapes, also the
+//! principal plane: every shape and sample as a dot
+//! ([`mfm_render::plots::scatter_plot`]).
 
 use crate::plausibility::Plausibility;
 use crate::quality::GmmQualityReport;
@@ -9,6 +11,7 @@ use crate::shape_quality::{RealSet, ShapeQuality, ShapeSets, weighted_mean};
 use mfm_data::pictures::{SHOWN, Shown, save};
 use mfm_data::{InMemorySignals, Result, SignalSource};
 use mfm_geometry::TriMesh;
+use mfm_render::plots::{ScatterPlot, ScatterSeries, scatter_plot};
 use mfm_render::{ColorRange, Colormap, GridOptions, Panel, RenderOptions};
 use std::path::{Path, PathBuf};
 
@@ -149,6 +152,45 @@ pub fn nearest_real(sets: &ShapeSets, q: &ShapeQuality, path: &Path) -> Result<(
     };
     let img = mfm_render::render_grid(&panels, 4, &opts)?;
     Ok(mfm_render::save_png(&img, path)?)
+}
+
+/// The training shapes, held-out shapes and samples of `q` as dots in the
+/// training shapes' principal plane ([`crate::principal_plane`]), one
+/// scale on both axes, in units of the template's diagonal.
+///
+/// # Errors
+/// [`mfm_data::DataError::Config`] for a report without a plane (written
+/// before planes were measured); the plot's errors.
+pub fn principal_plane(q: &ShapeQuality, path: &Path) -> Result<()> {
+    let Some(plane) = &q.plane else {
+        return Err(mfm_data::DataError::Config(
+            "the shape-quality report has no principal plane to draw".into(),
+        ));
+    };
+    let series = |label: &str, points: &[[f64; 2]], radius: u32| ScatterSeries {
+        label: format!("{label} ({})", points.len()),
+        points: points.iter().map(|c| (c[0], c[1])).collect(),
+        radius,
+    };
+    let spread = q
+        .spread
+        .map_or(String::new(), |s| format!("; spread {s:.2}"));
+    let plot = ScatterPlot {
+        title: format!(
+            "shapes in the training shapes' principal plane ({:.0}% + {:.0}% of their \
+             variance){spread}",
+            100.0 * plane.explained[0],
+            100.0 * plane.explained[1]
+        ),
+        x_label: "direction 1 (units of the template's diagonal)".into(),
+        y_label: "direction 2".into(),
+        series: vec![
+            series("training", &plane.train, 5),
+            series("held out", &plane.held_out, 6),
+            series("samples", &plane.samples, 4),
+        ],
+    };
+    Ok(scatter_plot(path, &plot)?)
 }
 
 /// The point-wise means of channel 0 (generated beside reference) to

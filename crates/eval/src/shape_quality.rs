@@ -66,6 +66,14 @@
 //! - **novelty** = `median_{s in S} min_{t in T} d(s, t) / floor`: near 0 for
 //!   copies of training shapes, about 1 for new shapes as far from the
 //!   training set as unseen real ones.
+//! - **spread** = `median_{s in S} d(s, mu) / median_{r in R} d(r, mu)`
+//!   with `mu` the mean of the (centred) training shapes: about 1 when the
+//!   samples vary about the mean shape as much as the data; below 1 when
+//!   they are pulled toward it (averages or blends of shapes: on a motion
+//!   cycle, poses cut across the cycle), 0 for the mean shape repeated;
+//!   above 1 beyond the data. Beside it, every shape's place in the
+//!   training shapes' principal plane ([`crate::principal_plane`]), which
+//!   `mfm eval --png` draws.
 //! - **flipped faces**: per sample, the fraction of faces whose normal (the
 //!   unnormalised cross product `(p1 - p0) x (p2 - p0)`) has a negative dot
 //!   product with the same face's normal on the sample's nearest real shape
@@ -139,6 +147,7 @@ use mfm_geometry::mesh::{dot, triangle_normal};
 use mfm_geometry::operators::Operators;
 
 use crate::metrics::{self, DistanceMatrix, MassWeighted};
+use crate::principal_plane::{PlaneProjector, PrincipalPlane};
 use crate::quality::Quartiles;
 
 /// The shapes [`shape_quality`] judges, all vertex positions of one mesh.
@@ -263,6 +272,16 @@ pub struct ShapeQuality {
     /// Median distance of a sample to the nearest training shape, over the
     /// floor.
     pub novelty: f64,
+    /// Median distance of a sample to the training shapes' mean over the
+    /// same for the real shapes (absent in reports written before it was
+    /// measured).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spread: Option<f64>,
+    /// Where the training shapes, held-out shapes and samples sit in the
+    /// training shapes' principal plane (absent in reports written before
+    /// it was measured).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub plane: Option<PrincipalPlane>,
     /// Fractions of faces flipped against the nearest real shape.
     pub flipped: FlippedFaces,
     /// The same fractions for the held-out shapes against their nearest
@@ -330,6 +349,7 @@ impl ShapeQuality {
                  shape's; about 1 is data-like, far below: detail lost, far above: noise)",
                 self.roughness
             ),
+            spread_line(self.spread, self.plane.as_ref()),
             format!(
                 "flipped faces {:.1}% median, {:.1}% mean, {:.1}% max (faces whose normal \
                  opposes the nearest real shape's: folds, or parts turned by more than a right \
@@ -343,8 +363,38 @@ impl ShapeQuality {
                 m.mmd, m.cov, m.one_nna
             ),
         ]
+        .into_iter()
+        .filter(|line| !line.is_empty())
+        .collect::<Vec<_>>()
         .join("\n")
     }
+}
+
+/// The summary's spread line with the plane's radii (empty when the
+/// report has no spread).
+fn spread_line(spread: Option<f64>, plane: Option<&PrincipalPlane>) -> String {
+    let Some(spread) = spread else {
+        return String::new();
+    };
+    let in_plane = plane.map_or(String::new(), |p| {
+        let radius = |c: &[f64; 2]| c[0].hypot(c[1]);
+        let real: Vec<f64> = p.train.iter().chain(&p.held_out).map(radius).collect();
+        let samples: Vec<f64> = p.samples.iter().map(radius).collect();
+        format!(
+            "; in the training shapes' principal plane ({:.0}% and {:.0}% of their variance) \
+             the median distance from the mean is {:.4} for the samples, {:.4} for the real \
+             shapes",
+            100.0 * p.explained[0],
+            100.0 * p.explained[1],
+            median(&samples),
+            median(&real)
+        )
+    });
+    format!(
+        "spread {spread:.2} (median distance of a sample to the training shapes' mean over the \
+         same for the real shapes; about 1 when the samples vary as the data does, below 1: \
+         pulled toward the mean shape, blends of shapes{in_plane})"
+    )
 }
 
 /// The centred distance of the [module docs](self): shapes (3-channel
@@ -559,6 +609,15 @@ pub fn shape_quality(sets: &ShapeSets) -> Result<ShapeQuality> {
     real_data.extend_from_slice(held.data());
     let real = InMemorySignals::new(real_data, n_t + n_h, v, 3)?;
     let samples = centred.centre(sets.samples)?;
+    let train = InMemorySignals::new(real.data()[..n_t * v * 3].to_vec(), n_t, v, 3)?;
+    let plane = PlaneProjector::fit(&train, &ops.mass, sets.diagonal, sets.seed)?;
+    let to_mean = |set: &InMemorySignals| -> Vec<f64> {
+        (0..set.len())
+            .into_par_iter()
+            .map(|i| plane.distance_to_mean(set.signal(i)))
+            .collect()
+    };
+    let spread = ratio(median(&to_mean(&samples)), median(&to_mean(&real)));
 
     let sample_real = centred.pairwise_centred(&samples, &real)?;
     let held_real = centred.pairwise_centred(&held, &real)?;
@@ -653,6 +712,8 @@ pub fn shape_quality(sets: &ShapeSets) -> Result<ShapeQuality> {
         baseline_size,
         roughness: median(&column(|q| q.roughness)),
         novelty: median(&column(|q| q.training_distance)) / floor,
+        spread: Some(spread),
+        plane: Some(plane.place(&train, &held, &samples)),
         flipped,
         held_out_flipped: Some(FlippedFaces::of(&held_out_flips)),
         metrics,

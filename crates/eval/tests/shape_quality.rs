@@ -382,6 +382,81 @@ fn the_report_round_trips_through_json_with_stable_names() -> TestResult {
     Ok(())
 }
 
+/// The median as the report takes it: the mean of the two middle values
+/// for an even count.
+fn median_of(mut x: Vec<f64>) -> f64 {
+    x.sort_by(f64::total_cmp);
+    let n = x.len();
+    if n % 2 == 1 {
+        x[n / 2]
+    } else {
+        0.5 * (x[n / 2 - 1] + x[n / 2])
+    }
+}
+
+#[test]
+fn spread_is_zero_for_the_mean_shape_and_halves_halfway_to_it() -> TestResult {
+    let f = family(1);
+    let (n, v) = (f.train.len(), f.mesh.num_vertices());
+    // the mean of the training shapes; centring is linear, so centred it is
+    // the mean of the centred shapes
+    let mut mean = vec![0.0f64; 3 * v];
+    for i in 0..n {
+        for (m, x) in mean.iter_mut().zip(f.train.signal(i)) {
+            *m += f64::from(*x) / n as f64;
+        }
+    }
+    let mean: Vec<f32> = mean.iter().map(|&x| x as f32).collect();
+    let d = CentredDistance::new(&lumped_mass(&f.mesh), f.diagonal)?;
+    let to_mean = |set: &InMemorySignals| -> Vec<f64> {
+        (0..set.len())
+            .map(|i| d.distance(set.signal(i), &mean).unwrap())
+            .collect()
+    };
+    let mut real = to_mean(&f.train);
+    real.extend(to_mean(&f.held_out));
+    let real = median_of(real);
+    let close = |x: f64, y: f64| (x - y).abs() <= 1e-5 * y.abs().max(1.0);
+
+    let q = f.judge(&f.train)?;
+    let spread = q.spread.unwrap();
+    assert!(
+        close(spread, median_of(to_mean(&f.train)) / real),
+        "{spread}"
+    );
+    // training shapes vary about their mean as the real shapes do
+    assert!((0.8..1.25).contains(&spread), "{}", q.summary());
+    assert!(q.summary().contains("spread"), "{}", q.summary());
+
+    let halfway: Vec<Vec<f32>> = (0..n)
+        .map(|i| {
+            f.train
+                .signal(i)
+                .iter()
+                .zip(&mean)
+                .map(|(x, m)| 0.5 * (x + m))
+                .collect()
+        })
+        .collect();
+    let h = f.judge(&f.set(halfway))?.spread.unwrap();
+    assert!(close(h, 0.5 * spread), "{h} against half of {spread}");
+
+    let flat = f.judge(&f.set(vec![mean.clone(); 8]))?;
+    assert!(flat.spread.unwrap() < 1e-5, "{}", flat.summary());
+    // the plane: every shape placed, the mean shape at its centre
+    let plane = flat.plane.unwrap();
+    assert_eq!(
+        (plane.train.len(), plane.held_out.len(), plane.samples.len()),
+        (n, f.held_out.len(), 8)
+    );
+    assert!(plane.samples.iter().all(|c| c[0].hypot(c[1]) < 1e-6));
+    assert!(
+        plane.explained[0] >= plane.explained[1]
+            && plane.explained[0] + plane.explained[1] <= 1.0 + 1e-9
+    );
+    Ok(())
+}
+
 #[test]
 fn the_picture_shows_samples_beside_their_nearest_real_shapes() -> TestResult {
     let f = family(1);
@@ -404,6 +479,14 @@ fn the_picture_shows_samples_beside_their_nearest_real_shapes() -> TestResult {
         "{:?}",
         (img.width(), img.height())
     );
+    let plane = dir.path().join("plane.png");
+    mfm_eval::pictures::principal_plane(&q, &plane)?;
+    let img = image::open(&plane)?.to_rgb8();
+    // dots in the palette's first three colours: training, held out, samples
+    for colour in [[31u8, 119, 180], [214, 39, 40], [44, 160, 44]] {
+        let near = |p: &image::Rgb<u8>| (0..3).all(|k| p[k].abs_diff(colour[k]) < 40);
+        assert!(img.pixels().filter(|p| near(p)).count() > 50, "{colour:?}");
+    }
     Ok(())
 }
 

@@ -1,4 +1,4 @@
-//! PNG plots of spectral diagnostics, drawn with
+//! PNG plots (spectral diagnostics, curves, point sets), drawn with
 //! [plotters](https://docs.rs/plotters) on an in-memory RGB canvas.
 //!
 //! - [`variance_plot`]: `Var(c_i)` against `lambda_i` on log-log axes, the
@@ -6,7 +6,9 @@
 //!   (noise kinds, meshes);
 //! - [`coefficient_histograms`]: for a few chosen frequencies (e.g. the
 //!   paper's `c_2, c_50, c_500`), histograms of the coefficient over several
-//!   meshes, overlaid as step outlines in one panel per frequency.
+//!   meshes, overlaid as step outlines in one panel per frequency;
+//! - [`curve_grid`]: panels of curves against steps or time;
+//! - [`scatter_plot`]: sets of points on one scale in both directions.
 //!
 //! Text (titles, tick labels, legends) is rendered with the public-domain
 //! `font8x8` bitmap glyphs by this module's own backend, so no system font,
@@ -541,6 +543,157 @@ pub fn curve_grid(path: impl AsRef<Path>, panels: &[CurvePanel], columns: usize)
                     );
                 }
             }
+            root.present().map_err(|e| e.to_string())
+        };
+        draw().map_err(fail)?;
+    }
+    write_png(path, &buf, w, h)
+}
+
+/// Width and height in pixels of a [`scatter_plot`].
+pub const SCATTER_PLOT_SIZE: (u32, u32) = (820, 820);
+
+/// One set of points of a [`scatter_plot`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScatterSeries {
+    /// Legend text.
+    pub label: String,
+    /// The points `(x, y)`.
+    pub points: Vec<(f64, f64)>,
+    /// Dot radius in pixels.
+    pub radius: u32,
+}
+
+/// What a [`scatter_plot`] shows.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScatterPlot {
+    /// Title above the plot.
+    pub title: String,
+    /// `x` axis title.
+    pub x_label: String,
+    /// `y` axis title.
+    pub y_label: String,
+    /// The series, drawn in order (later ones on top), the `i`-th in the
+    /// `i`-th colour of the palette.
+    pub series: Vec<ScatterSeries>,
+}
+
+/// Writes a PNG of `plot`: each series as filled dots, with axes, tick
+/// labels and a legend, both axes at **one scale** (a square range about
+/// the points' centre, so that distances read the same along `x` and `y`).
+/// Points that are not finite are left out. The file is written
+/// atomically. Size [`SCATTER_PLOT_SIZE`].
+///
+/// # Errors
+/// [`RenderError::Plot`] if no series has a finite point, or the file
+/// cannot be written.
+///
+/// # Example
+/// ```
+/// use mfm_render::plots::{ScatterPlot, ScatterSeries, scatter_plot};
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("plane.png");
+/// let ring = (0..24).map(|k| {
+///     let a = k as f64 * std::f64::consts::TAU / 24.0;
+///     (a.cos(), a.sin())
+/// });
+/// let plot = ScatterPlot {
+///     title: "principal plane".into(),
+///     x_label: "direction 1".into(),
+///     y_label: "direction 2".into(),
+///     series: vec![ScatterSeries { label: "data".into(), points: ring.collect(), radius: 4 }],
+/// };
+/// scatter_plot(&path, &plot).unwrap();
+/// assert!(std::fs::metadata(&path).unwrap().len() > 1000);
+/// ```
+pub fn scatter_plot(path: impl AsRef<Path>, plot: &ScatterPlot) -> Result<()> {
+    let path = path.as_ref();
+    let fail = |message: String| RenderError::Plot {
+        path: path.to_path_buf(),
+        message,
+    };
+    let kept: Vec<Vec<(f64, f64)>> = plot
+        .series
+        .iter()
+        .map(|s| {
+            s.points
+                .iter()
+                .copied()
+                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                .collect()
+        })
+        .collect();
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+    for &(x, y) in kept.iter().flatten() {
+        (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+    }
+    if x0 > x1 {
+        return Err(fail(format!(
+            "{:?} has no finite point to draw",
+            plot.title
+        )));
+    }
+    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+    let half = (x1 - x0)
+        .max(y1 - y0)
+        .max(1e-12 * cx.abs().max(cy.abs()).max(1.0))
+        * 0.55;
+    let (w, h) = SCATTER_PLOT_SIZE;
+    let mut buf = vec![255u8; (w * h * 3) as usize];
+    {
+        let root = Canvas::new(&mut buf, w, h).into_drawing_area();
+        let draw = || -> std::result::Result<(), String> {
+            root.fill(&WHITE).map_err(|e| e.to_string())?;
+            let builder = || {
+                let mut b = ChartBuilder::on(&root);
+                b.caption(&plot.title, ("sans-serif", 24))
+                    .margin(20)
+                    .x_label_area_size(60)
+                    .y_label_area_size(90);
+                b
+            };
+            // the plotting area's pixels decide the ranges: one scale on both axes
+            let (pw, ph) = builder()
+                .build_cartesian_2d(0.0..1.0, 0.0..1.0)
+                .map_err(|e| e.to_string())?
+                .plotting_area()
+                .dim_in_pixel();
+            let (pw, ph) = (f64::from(pw.max(1)), f64::from(ph.max(1)));
+            let (hx, hy) = if pw >= ph {
+                (half * pw / ph, half)
+            } else {
+                (half, half * ph / pw)
+            };
+            let mut chart = builder()
+                .build_cartesian_2d(cx - hx..cx + hx, cy - hy..cy + hy)
+                .map_err(|e| e.to_string())?;
+            chart
+                .configure_mesh()
+                .x_desc(plot.x_label.as_str())
+                .y_desc(plot.y_label.as_str())
+                .label_style(("sans-serif", 16))
+                .axis_desc_style(("sans-serif", 18))
+                .x_label_formatter(&|v| short_number(*v))
+                .y_label_formatter(&|v| short_number(*v))
+                .draw()
+                .map_err(|e| e.to_string())?;
+            for (i, (s, pts)) in plot.series.iter().zip(&kept).enumerate() {
+                let c = color(i);
+                let r = s.radius.max(1);
+                chart
+                    .draw_series(pts.iter().map(|&p| Circle::new(p, r, c.mix(0.85).filled())))
+                    .map_err(|e| e.to_string())?
+                    .label(s.label.as_str())
+                    .legend(move |(x, y)| Circle::new((x + 10, y), r, c.filled()));
+            }
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .label_font(("sans-serif", 16))
+                .background_style(WHITE.mix(0.85))
+                .border_style(BLACK)
+                .draw()
+                .map_err(|e| e.to_string())?;
             root.present().map_err(|e| e.to_string())
         };
         draw().map_err(fail)?;

@@ -10,9 +10,10 @@
 //! 3. `mfm sample` of `--samples` shapes on the reference mesh (PLY files
 //!    of the first four);
 //! 4. `mfm eval` against the experiment: the generator-free measures
-//!    (plausibility, coverage, roughness, novelty, flipped faces, MMD /
-//!    COV / 1-NNA) and the picture of samples beside their nearest real
-//!    shapes.
+//!    (plausibility, coverage, roughness, novelty, spread, flipped faces,
+//!    MMD / COV / 1-NNA), the picture of samples beside their nearest real
+//!    shapes and the one of every shape in the training shapes' principal
+//!    plane.
 //!
 //! Without `--data`, the shared sequences `../shared/data/{horse-gallop,
 //! crane}` when present, else a built-in sequence (a bending, travelling
@@ -228,9 +229,9 @@ fn write_report(args: &OwnArgs, rows: &[Row], seconds: f64) -> String {
     let _ = writeln!(
         s,
         "| data | train / held out | template V | reference V | plausibility | coverage | \
-         roughness | flipped (median / max; the data's max) | novelty | MMD | COV | 1-NNA | \
-         train s | sample s |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+         roughness | flipped (median / max; the data's max) | novelty | spread | MMD | COV | \
+         1-NNA | train s | sample s |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for r in rows {
         let Some(q) = &r.report.shape_quality else {
@@ -240,7 +241,7 @@ fn write_report(args: &OwnArgs, rows: &[Row], seconds: f64) -> String {
         let _ = writeln!(
             s,
             "| {} | {} / {} | {} | {} | {:.2} | {:.2} | {:.2} | {:.1}% / {:.1}%; {} | {:.2} | \
-             {:.4} | {:.2} | {:.2} | {:.0} | {:.0} |",
+             {} | {:.4} | {:.2} | {:.2} | {:.0} | {:.0} |",
             r.name,
             r.import.train,
             r.import.held_out,
@@ -254,6 +255,7 @@ fn write_report(args: &OwnArgs, rows: &[Row], seconds: f64) -> String {
             q.held_out_flipped
                 .map_or("-".to_owned(), |d| format!("{:.1}%", 100.0 * d.max)),
             q.novelty,
+            q.spread.map_or("-".to_owned(), |x| format!("{x:.2}")),
             q.metrics.mmd,
             q.metrics.cov,
             q.metrics.one_nna,
@@ -267,14 +269,17 @@ fn write_report(args: &OwnArgs, rows: &[Row], seconds: f64) -> String {
          flipped faces <= 1% (the data's own: each held-out shape against its nearest \
          training shape), novelty >= 0.3. Distances are mass-weighted RMS after centring, \
          over the template's diagonal; plausibility, coverage and novelty are ratios to the \
-         data's floor (a held-out shape's distance to the nearest training shape).\n"
+         data's floor (a held-out shape's distance to the nearest training shape). Spread: \
+         a sample's distance to the training shapes' mean over a real shape's (medians; below \
+         1: samples pulled toward the mean shape, blends of shapes).\n"
     );
     for r in rows {
         let _ = writeln!(
             s,
             "- {}: `{0}/data/preview.png` (training shapes), `{0}/samples_beside_nearest.png` \
              (samples on the reference mesh beside their nearest real shapes), \
-             `{0}/samples/sample_00N.ply`",
+             `{0}/samples_beside_nearest_plane.png` (every shape in the training shapes' \
+             principal plane), `{0}/samples/sample_00N.ply`",
             r.name
         );
         for w in &r.import.warnings {
