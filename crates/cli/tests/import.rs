@@ -116,6 +116,24 @@ fn imported_frames_evaluate_against_themselves() {
     assert!(out.contains("spread "), "{out}");
     assert_eq!(q["plane"]["samples"], q["plane"]["held_out"], "{q}");
     assert!(d.join("m_plane.png").is_file());
+    // a file of a companion picture's name is the user's unless the
+    // picture itself is there too (an earlier evaluation's)
+    std::fs::write(d.join("n_plane.png"), "mine").unwrap();
+    let eval_to = |png| {
+        [
+            "eval",
+            "--samples",
+            "held.npy",
+            "--reference",
+            "data",
+            "--png",
+            png,
+        ]
+    };
+    refused(d, &eval_to("n.png"), "n_plane.png");
+    assert_eq!(std::fs::read(d.join("n_plane.png")).unwrap(), b"mine");
+    assert!(!d.join("n.png").exists());
+    ok(d, &eval_to("m.png"));
     // with the template as the reference mesh, the same shapes are exactly
     // as rough as themselves
     ok(

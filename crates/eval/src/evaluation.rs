@@ -547,20 +547,20 @@ impl PlausibilityFiles<'_> {
 }
 
 /// The output guard of an evaluation: the JSON, the picture and the
-/// pictures beside it.
+/// pictures beside it, which are its implicit companions
+/// ([`mfm_files::Outputs::implicit`]): one of their names may be replaced
+/// only when the picture itself exists too (an earlier evaluation's), never
+/// a file of that name that is someone else's.
 fn guard(inputs: &[&Path], json: Option<&Path>, png: Option<&Path>) -> Result<mfm_files::Undo> {
-    let pictures = png.into_iter().flat_map(|png| {
-        [
-            png.to_path_buf(),
-            pictures::sibling_png(png, "samples"),
-            pictures::sibling_png(png, "difference"),
-            pictures::sibling_png(png, "plane"),
-        ]
-    });
-    let outputs = mfm_files::Outputs::new()
+    let mut outputs = mfm_files::Outputs::new()
         .inputs(inputs)
         .outputs(json)
-        .outputs(pictures);
+        .outputs(png);
+    if let Some(png) = png {
+        for suffix in ["samples", "difference", "plane"] {
+            outputs = outputs.implicit(pictures::sibling_png(png, suffix), png);
+        }
+    }
     Ok(outputs.prepare()?)
 }
 

@@ -84,6 +84,7 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use mfm_train::LrSchedule;
 
+use crate::coupling::Coupling;
 use crate::device::DeviceChoice;
 use crate::error::{FmError, Result};
 use crate::path::TimeSampling;
@@ -466,6 +467,11 @@ pub struct TrainConfig {
     /// How the path time `t` of each training signal is drawn (default
     /// `uniform`, the official recipe): see [`TimeSampling`].
     pub time: TimeSampling,
+    /// How noise samples are paired with data signals (default
+    /// `independent`, the paper's; `ot:P` pairs a pool of `P` of each by
+    /// least total distance): see [`crate::coupling`].
+    #[serde(skip_serializing_if = "Coupling::is_independent")]
+    pub coupling: Coupling,
     /// Steps whose checkpoints are kept whatever `keep_checkpoints` says
     /// (default none), written even when off the `checkpoint_every` grid:
     /// snapshots for curves of sample quality against training time.
@@ -520,6 +526,7 @@ impl Default for TrainConfig {
             ema: 0.0,
             jacobian_weight: 1.0,
             time: TimeSampling::Uniform,
+            coupling: Coupling::Independent,
             keep_at: Vec::new(),
         }
     }
@@ -664,6 +671,9 @@ impl RunConfig {
         t.time
             .validate()
             .map_err(|e| FmError::Config(format!("train.time: {e}")))?;
+        t.coupling
+            .validate(t.batch)
+            .map_err(|e| FmError::Config(format!("train.coupling: {e}")))?;
         if self.sample.steps == 0 {
             return bad("sample.steps", "at least 1", "0".into());
         }

@@ -3,6 +3,7 @@
 pub mod checkpoint;
 pub mod config;
 pub mod context;
+pub mod coupling;
 pub mod device;
 pub mod error;
 pub mod official;

@@ -11,6 +11,9 @@
 //! 1. `f_0`: noise on the training mesh (the run's kind, times its scale
 //!    `sigma`: by linearity `solve(L + tau M, sigma sqrt(m) n)`),
 //!    `t ~ U[0, 1)` per batch item (or another `train.time` distribution);
+//!    the noise samples are paired with the signals independently, or with
+//!    `train.coupling = "ot:P"` by the least-cost assignment within a pool
+//!    of `P` of each ([`crate::coupling`]);
 //! 2. with `train.center` (the default), `f_0` and `f_1` each minus its
 //!    mass-weighted mean per channel and connected component;
 //! 3. `f_t = (1 - t) f_0 + t f_1`, target `delta = f_1 - f_0`;
@@ -31,12 +34,14 @@
 //!
 //! ## Determinism and resuming
 //! Every random choice is a pure function of the seed and the step `s`:
-//! - batch: positions `s B .. s B + B` of an endless sequence of epochs, each
+//! - batch: positions `s B .. s B + B` (with a pool, `s P .. s P + P`, of
+//!   which the first `B` are trained on) of an endless sequence of epochs, each
 //!   a permutation of the dataset drawn from the ChaCha8 stream `e` of a key
 //!   derived from `(seed, "epoch")`;
 //! - times: `B` draws from stream `s` of a key derived from `(seed,
 //!   "time")` (uniform `f32`, or `train.time`'s distribution);
-//! - noise: samples `s B .. s B + B` of the noise sequence of `seed`
+//! - noise: samples `s B .. s B + B` (with a pool, `s P .. s P + P`) of the
+//!   noise sequence of `seed`
 //!   (`NoiseSampler::sample_range_f32`), which do not depend on the batch;
 //! - initial weights: libtorch's generator seeded with `seed` (under a
 //!   process-wide lock, see [`Trainer::new`]).
@@ -90,6 +95,7 @@ pub use mfm_train::TrainSummary;
 use crate::checkpoint::{CONFIG_FILE, FLOW_FILE, FlowSpec, Prediction};
 use crate::config::{CLEAN_WEIGHT_MAX, FrameChoice, NoiseScale, RunConfig};
 use crate::context::MeshContext;
+use crate::coupling::{Coupling, least_cost_assignment, squared_distances};
 use crate::device::DeviceChoice;
 use crate::error::{FmError, Result};
 use crate::path::rectified_path;
@@ -98,7 +104,8 @@ use mfm_data::signals::{Displacements, FramedPositions, SignalSource};
 
 /// Description of the randomness recorded in every checkpoint.
 const RNG_DESCRIPTION: &str = "ChaCha8 streams keyed by (seed, purpose), stream = step or epoch; \
-     noise = NoiseSampler::sample_range_f32(step * batch, batch, C, seed); no state beyond the step";
+     noise = NoiseSampler::sample_range_f32(step * P, P, C, seed), P the batch or train.coupling's pool; \
+     no state beyond the step";
 
 /// Purposes of derived random keys.
 const PURPOSE_EPOCH: u64 = 1;
@@ -792,15 +799,79 @@ impl Trainer {
 }
 
 impl FlowObjective {
-    /// Signal indices, times and noise sample range of step `step` (a pure
-    /// function of the seed and the step).
-    fn step_inputs(&mut self, step: u64) -> (Vec<usize>, Vec<f32>) {
-        let b = self.config.train.batch;
-        let idx = self.order.indices(step, b);
+    /// Path times of step `step` (a pure function of the seed and the
+    /// step).
+    fn step_times(&self, step: u64) -> Vec<f32> {
         let mut rng = derived_rng(self.config.train.seed, PURPOSE_TIME, step);
         let time = self.config.train.time;
-        let t: Vec<f32> = (0..b).map(|_| time.draw(&mut rng)).collect();
-        (idx, t)
+        (0..self.config.train.batch)
+            .map(|_| time.draw(&mut rng))
+            .collect()
+    }
+
+    /// The data signals and noise samples (scaled) of step `s`, `B x V x
+    /// C` values each, paired item by item as `train.coupling` says
+    /// ([`crate::coupling`]): with a pool, `P` of each are drawn and the
+    /// first `B` data signals come with the noise samples the least-cost
+    /// assignment gives them.
+    fn step_pairs(&mut self, s: u64) -> Result<(Vec<f32>, Vec<f32>)> {
+        let b = self.config.train.batch;
+        let (v, c) = (self.signals.num_vertices(), self.flow.channels);
+        let pool = match self.config.train.coupling {
+            Coupling::Independent => b,
+            Coupling::MinibatchOt { pool } => pool,
+        };
+        let idx = self.order.indices(s, pool);
+        let mut data = vec![0.0f32; pool * v * c];
+        self.signals.read_into(&idx, &mut data)?;
+        let first = usize::try_from(s)
+            .ok()
+            .and_then(|s| s.checked_mul(pool))
+            .ok_or_else(|| FmError::Config(format!("step {s} times pool {pool} overflows")))?;
+        let mut noise = self
+            .noise
+            .sample_range_f32(first, pool, c, self.config.train.seed)?
+            .into_data();
+        let scale = self.flow.noise_scale as f32;
+        if scale != 1.0 {
+            noise.iter_mut().for_each(|x| *x *= scale);
+        }
+        if self.config.train.coupling.is_independent() {
+            return Ok((data, noise));
+        }
+        let column_of_row = self.transport_assignment(&noise, &data, pool)?;
+        let mut noise_of_data = vec![0; pool];
+        for (i, &j) in column_of_row.iter().enumerate() {
+            noise_of_data[j] = i;
+        }
+        let item = v * c;
+        let paired: Vec<f32> = noise_of_data[..b]
+            .iter()
+            .flat_map(|&i| noise[i * item..(i + 1) * item].iter().copied())
+            .collect();
+        data.truncate(b * item);
+        Ok((data, paired))
+    }
+
+    /// The least-cost assignment of `pool` noise samples (rows) to `pool`
+    /// data signals (columns) under the squared mass-weighted distance of
+    /// the run's frame, both centred first when the run centres.
+    fn transport_assignment(&self, noise: &[f32], data: &[f32], pool: usize) -> Result<Vec<usize>> {
+        let (v, c) = (self.signals.num_vertices(), self.flow.channels);
+        let centred = |x: &[f32]| -> Result<Vec<f32>> {
+            if !self.flow.centered {
+                return Ok(x.to_vec());
+            }
+            let t = Tensor::from_slice(x)
+                .reshape([pool as i64, v as i64, c as i64])
+                .to_device(self.device);
+            let t = self.mesh.remove_mass_mean(&t)?.to_device(Device::Cpu);
+            Ok(Vec::<f32>::try_from(t.flatten(0, -1))?)
+        };
+        let (x0, x1) = (centred(noise)?, centred(data)?);
+        let costs = squared_distances(&x0, &x1, pool, self.noise.mass(), c)
+            .map_err(|e| FmError::Config(format!("internal: {e}")))?;
+        least_cost_assignment(&costs, pool).map_err(FmError::Config)
     }
 
     /// The augmentation of step `step` as `[B, 1, 1]` scales and `[B, 1, 3]`
@@ -828,21 +899,8 @@ impl FlowObjective {
     fn train_step(&mut self, net: &PoissonNet, s: u64) -> Result<f64> {
         let b = self.config.train.batch;
         let (v, c) = (self.signals.num_vertices(), self.flow.channels);
-        let (idx, times) = self.step_inputs(s);
-        let mut data = vec![0.0f32; b * v * c];
-        self.signals.read_into(&idx, &mut data)?;
-        let first = usize::try_from(s)
-            .ok()
-            .and_then(|s| s.checked_mul(b))
-            .ok_or_else(|| FmError::Config(format!("step {s} times batch {b} overflows")))?;
-        let mut noise = self
-            .noise
-            .sample_range_f32(first, b, c, self.config.train.seed)?
-            .into_data();
-        let scale = self.flow.noise_scale as f32;
-        if scale != 1.0 {
-            noise.iter_mut().for_each(|x| *x *= scale);
-        }
+        let times = self.step_times(s);
+        let (data, noise) = self.step_pairs(s)?;
         let shape = [b as i64, v as i64, c as i64];
         let x1 = Tensor::from_slice(&data)
             .reshape(shape)

@@ -1,8 +1,8 @@
 //! The training options beyond the official recipe: the weight average
 //! (`train.ema`), the time distribution (`train.time`), the Jacobian weight
-//! of the loss (`train.jacobian_weight`) and kept snapshots
-//! (`train.keep_at`): each changes what it says, resumes bit for bit, and
-//! is refused when out of range.
+//! of the loss (`train.jacobian_weight`), kept snapshots (`train.keep_at`)
+//! and minibatch optimal transport (`train.coupling`): each changes what it
+//! says, resumes bit for bit, and is refused when out of range.
 #![allow(clippy::unwrap_used)]
 
 use std::collections::BTreeMap;
@@ -12,6 +12,7 @@ use std::sync::atomic::AtomicBool;
 
 use mfm_data::InMemorySignals;
 use mfm_fm::config::RunConfig;
+use mfm_fm::coupling::{Coupling, least_cost_assignment, squared_distances};
 use mfm_fm::device::DeviceChoice;
 use mfm_fm::path::TimeSampling;
 use mfm_fm::sample::Sampler;
@@ -230,6 +231,11 @@ fn time_sampling_and_jacobian_weight_change_the_run_and_resume_bit_for_bit() {
             c.train.jacobian_weight = 0.1;
             c
         }),
+        ("minibatch optimal transport", {
+            let mut c = base.clone();
+            c.train.coupling = Coupling::MinibatchOt { pool: 4 };
+            c
+        }),
     ];
     for (name, cfg) in variants {
         let full = tempfile::tempdir().unwrap();
@@ -260,7 +266,11 @@ fn the_new_fields_parse_default_and_refuse_bad_values() {
     assert_eq!(c.train.time, TimeSampling::Uniform);
     assert_eq!(c.train.jacobian_weight, 1.0);
     assert!(c.train.keep_at.is_empty());
-    let text = "[train]\nema = 0.999\ntime = \"logit-normal:-0.5:0.8\"\njacobian_weight = 0.0\nkeep_at = [100, 1000]\n";
+    assert_eq!(c.train.coupling, Coupling::Independent);
+    // the default is not written: configurations and checkpoints of runs
+    // without it read as before
+    assert!(!c.to_toml_string().unwrap().contains("coupling"));
+    let text = "[train]\nema = 0.999\ntime = \"logit-normal:-0.5:0.8\"\njacobian_weight = 0.0\nkeep_at = [100, 1000]\ncoupling = \"ot:64\"\n";
     let c = RunConfig::from_toml_str(text, "t.toml").unwrap();
     assert_eq!(c.train.ema, 0.999);
     assert_eq!(
@@ -272,6 +282,7 @@ fn the_new_fields_parse_default_and_refuse_bad_values() {
     );
     assert_eq!(c.train.jacobian_weight, 0.0);
     assert_eq!(c.train.keep_at, [100, 1000]);
+    assert_eq!(c.train.coupling, Coupling::MinibatchOt { pool: 64 });
     // written and read back
     let again = RunConfig::from_toml_str(&c.to_toml_string().unwrap(), "t.toml").unwrap();
     assert_eq!(again, c);
@@ -283,6 +294,13 @@ fn the_new_fields_parse_default_and_refuse_bad_values() {
         ("[train]\ntime = \"late:-2\"\n", "power > 0"),
         ("[train]\ntime = \"gaussian\"\n", "unknown time sampling"),
         ("[train]\ntime = \"late:x\"\n", "not a number"),
+        (
+            "[train]\nbatch = 8\ncoupling = \"ot:4\"\n",
+            "train.coupling",
+        ),
+        ("[train]\ncoupling = \"ot:5000\"\n", "at most 1024"),
+        ("[train]\ncoupling = \"ot:x\"\n", "whole number"),
+        ("[train]\ncoupling = \"sinkhorn\"\n", "unknown coupling"),
     ] {
         let e = RunConfig::from_toml_str(bad, "bad.toml")
             .unwrap_err()
@@ -292,6 +310,74 @@ fn the_new_fields_parse_default_and_refuse_bad_values() {
     // keep_at may change on resume; ema may not
     assert!(mfm_fm::train::RESUMABLE_FIELDS.contains(&"train.keep_at"));
     assert!(!mfm_fm::train::RESUMABLE_FIELDS.contains(&"train.ema"));
+}
+
+/// All permutations of `0..n`.
+fn permutations(n: usize) -> Vec<Vec<usize>> {
+    if n == 0 {
+        return vec![Vec::new()];
+    }
+    let mut all = Vec::new();
+    for p in permutations(n - 1) {
+        for at in 0..n {
+            let mut q = p.clone();
+            q.insert(at, n - 1);
+            all.push(q);
+        }
+    }
+    all
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// The assignment is a permutation whose total cost no other
+    /// permutation beats (all of them tried).
+    #[test]
+    fn the_assignment_is_a_least_cost_permutation(
+        n in 1usize..7,
+        costs in prop::collection::vec(-5.0f64..5.0, 36),
+    ) {
+        let costs = &costs[..n * n];
+        let a = least_cost_assignment(costs, n).unwrap();
+        let mut seen = a.clone();
+        seen.sort_unstable();
+        prop_assert_eq!(seen, (0..n).collect::<Vec<_>>());
+        let total = |p: &[usize]| -> f64 { p.iter().enumerate().map(|(i, &j)| costs[i * n + j]).sum() };
+        let best = permutations(n).iter().map(|p| total(p)).fold(f64::INFINITY, f64::min);
+        prop_assert!(total(&a) <= best + 1e-9, "{} > {}", total(&a), best);
+    }
+
+    /// The cost matrix is the squared mass-weighted distance: zero between
+    /// a set and itself on the diagonal, transposed when the sets swap, and
+    /// each entry the sum written out.
+    #[test]
+    fn the_pairing_costs_are_squared_mass_weighted_distances(
+        n in 1usize..5,
+        a in prop::collection::vec(-2.0f32..2.0, 4 * 5 * 2),
+        b in prop::collection::vec(-2.0f32..2.0, 4 * 5 * 2),
+        mass in prop::collection::vec(0.1f64..2.0, 5),
+    ) {
+        let (a, b) = (&a[..n * 10], &b[..n * 10]);
+        let ab = squared_distances(a, b, n, &mass, 2).unwrap();
+        let ba = squared_distances(b, a, n, &mass, 2).unwrap();
+        let aa = squared_distances(a, a, n, &mass, 2).unwrap();
+        for i in 0..n {
+            prop_assert_eq!(aa[i * n + i], 0.0);
+            for j in 0..n {
+                prop_assert_eq!(ab[i * n + j], ba[j * n + i]);
+                let mut direct = 0.0;
+                for v in 0..5 {
+                    for k in 0..2 {
+                        let d = f64::from(a[i * 10 + v * 2 + k]) - f64::from(b[j * 10 + v * 2 + k]);
+                        direct += mass[v] * d * d;
+                    }
+                }
+                prop_assert!((ab[i * n + j] - direct).abs() <= 1e-9 * direct.max(1.0));
+            }
+        }
+        prop_assert!(squared_distances(a, &b[..b.len() - 1], n, &mass, 2).is_err());
+    }
 }
 
 proptest! {
