@@ -827,7 +827,7 @@ impl FlowObjective {
         let first = usize::try_from(s)
             .ok()
             .and_then(|s| s.checked_mul(pool))
-            .ok_or_else(|| FmError::Config(format!("step {s} times pool {pool} overflows")))?;
+            .ok_or_else(|| FmError::Config(format!("step {s} times {pool} signals overflows")))?;
         let mut noise = self
             .noise
             .sample_range_f32(first, pool, c, self.config.train.seed)?
