@@ -12,6 +12,7 @@
 #![allow(clippy::unwrap_used)]
 
 use mfm_data::{DataError, InMemorySignals, SignalSource};
+use mfm_eval::quality::Quartiles;
 use mfm_eval::shape_quality::{CentredDistance, RealSet, ShapeQuality, ShapeSets, shape_quality};
 use mfm_geometry::TriMesh;
 use mfm_geometry::operators::lumped_mass;
@@ -382,18 +383,6 @@ fn the_report_round_trips_through_json_with_stable_names() -> TestResult {
     Ok(())
 }
 
-/// The median as the report takes it: the mean of the two middle values
-/// for an even count.
-fn median_of(mut x: Vec<f64>) -> f64 {
-    x.sort_by(f64::total_cmp);
-    let n = x.len();
-    if n % 2 == 1 {
-        x[n / 2]
-    } else {
-        0.5 * (x[n / 2 - 1] + x[n / 2])
-    }
-}
-
 #[test]
 fn spread_is_zero_for_the_mean_shape_and_halves_halfway_to_it() -> TestResult {
     let f = family(1);
@@ -415,13 +404,13 @@ fn spread_is_zero_for_the_mean_shape_and_halves_halfway_to_it() -> TestResult {
     };
     let mut real = to_mean(&f.train);
     real.extend(to_mean(&f.held_out));
-    let real = median_of(real);
+    let real = Quartiles::of(&real).median;
     let close = |x: f64, y: f64| (x - y).abs() <= 1e-5 * y.abs().max(1.0);
 
     let q = f.judge(&f.train)?;
     let spread = q.spread.unwrap();
     assert!(
-        close(spread, median_of(to_mean(&f.train)) / real),
+        close(spread, Quartiles::of(&to_mean(&f.train)).median / real),
         "{spread}"
     );
     // training shapes vary about their mean as the real shapes do

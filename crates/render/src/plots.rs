@@ -35,6 +35,7 @@ use std::convert::Infallible;
 use std::path::Path;
 
 use font8x8::{BASIC_FONTS, GREEK_FONTS, LATIN_FONTS, UnicodeFonts};
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters_backend::text_anchor::{HPos, VPos};
 use plotters_backend::{BackendColor, BackendCoord, BackendTextStyle, DrawingErrorKind};
@@ -170,58 +171,44 @@ pub fn variance_plot(path: impl AsRef<Path>, title: &str, series: &[VarianceSeri
     let (y0, y1) = (y0 / 1.5, y1.max(y0 * 2.0) * 1.5);
 
     let (w, h) = VARIANCE_PLOT_SIZE;
-    let mut buf = vec![255u8; (w * h * 3) as usize];
-    {
-        let root = Canvas::new(&mut buf, w, h).into_drawing_area();
-        let draw = || -> std::result::Result<(), String> {
-            root.fill(&WHITE).map_err(|e| e.to_string())?;
-            let mut chart = ChartBuilder::on(&root)
-                .caption(title, ("sans-serif", 36))
-                .margin(20)
-                .x_label_area_size(60)
-                .y_label_area_size(110)
-                .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
-                .map_err(|e| e.to_string())?;
-            chart
-                .configure_mesh()
-                .x_desc("eigenvalue lambda_i")
-                .y_desc("Var(c_i)")
-                .label_style(("sans-serif", 18))
-                .axis_desc_style(("sans-serif", 20))
-                .x_label_formatter(&|v| short_number(*v))
-                .y_label_formatter(&|v| short_number(*v))
-                .draw()
-                .map_err(|e| e.to_string())?;
-            for (i, (s, (emp, th))) in series.iter().zip(&points).enumerate() {
-                let c = color(i);
-                if !th.is_empty() {
-                    chart
-                        .draw_series(LineSeries::new(th.iter().copied(), c.stroke_width(2)))
-                        .map_err(|e| e.to_string())?
-                        .label(format!("{} (theory)", s.label))
-                        .legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
-                        });
-                }
+    plot_png(path, (w, h), |root| {
+        let mut chart = ChartBuilder::on(root)
+            .caption(title, ("sans-serif", 36))
+            .margin(20)
+            .x_label_area_size(60)
+            .y_label_area_size(110)
+            .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc("eigenvalue lambda_i")
+            .y_desc("Var(c_i)")
+            .label_style(("sans-serif", 18))
+            .axis_desc_style(("sans-serif", 20))
+            .x_label_formatter(&|v| short_number(*v))
+            .y_label_formatter(&|v| short_number(*v))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        for (i, (s, (emp, th))) in series.iter().zip(&points).enumerate() {
+            let c = color(i);
+            if !th.is_empty() {
                 chart
-                    .draw_series(emp.iter().map(|&p| Circle::new(p, 3, c.mix(0.8).filled())))
+                    .draw_series(LineSeries::new(th.iter().copied(), c.stroke_width(2)))
                     .map_err(|e| e.to_string())?
-                    .label(format!("{} (empirical)", s.label))
-                    .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
+                    .label(format!("{} (theory)", s.label))
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
+                    });
             }
             chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::LowerLeft)
-                .label_font(("sans-serif", 18))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()
-                .map_err(|e| e.to_string())?;
-            root.present().map_err(|e| e.to_string())
-        };
-        draw().map_err(fail)?;
-    }
-    write_png(path, &buf, w, h)
+                .draw_series(emp.iter().map(|&p| Circle::new(p, 3, c.mix(0.8).filled())))
+                .map_err(|e| e.to_string())?
+                .label(format!("{} (empirical)", s.label))
+                .legend(move |(x, y)| Circle::new((x + 10, y), 3, c.filled()));
+        }
+        draw_legend(&mut chart, SeriesLabelPosition::LowerLeft, 18)?;
+        Ok(())
+    })
 }
 
 /// Writes a PNG with one panel per entry of `panels`, side by side: the
@@ -293,56 +280,42 @@ pub fn coefficient_histograms(path: impl AsRef<Path>, panels: &[HistogramPanel])
     }
     let (pw, h) = HISTOGRAM_PANEL_SIZE;
     let w = pw * panels.len() as u32;
-    let mut buf = vec![255u8; (w as usize) * (h as usize) * 3];
-    {
-        let root = Canvas::new(&mut buf, w, h).into_drawing_area();
-        let draw = || -> std::result::Result<(), String> {
-            root.fill(&WHITE).map_err(|e| e.to_string())?;
-            let areas = root.split_evenly((1, panels.len()));
-            for ((area, p), (r, ymax, outlines)) in areas.iter().zip(panels).zip(&prepared) {
-                let mut chart = ChartBuilder::on(area)
-                    .caption(&p.title, ("sans-serif", 30))
-                    .margin(15)
-                    .x_label_area_size(50)
-                    .y_label_area_size(80)
-                    .build_cartesian_2d(-r..*r, 0.0..*ymax)
-                    .map_err(|e| e.to_string())?;
+    plot_png(path, (w, h), |root| {
+        let areas = root.split_evenly((1, panels.len()));
+        for ((area, p), (r, ymax, outlines)) in areas.iter().zip(panels).zip(&prepared) {
+            let mut chart = ChartBuilder::on(area)
+                .caption(&p.title, ("sans-serif", 30))
+                .margin(15)
+                .x_label_area_size(50)
+                .y_label_area_size(80)
+                .build_cartesian_2d(-r..*r, 0.0..*ymax)
+                .map_err(|e| e.to_string())?;
+            chart
+                .configure_mesh()
+                .x_desc("coefficient value")
+                .y_desc("density")
+                .label_style(("sans-serif", 16))
+                .axis_desc_style(("sans-serif", 18))
+                .x_labels(6)
+                // ticks that land on 0 up to round-off read "0"
+                .x_label_formatter(&|v| short_number(if v.abs() < 1e-9 * r { 0.0 } else { *v }))
+                .y_label_formatter(&|v| short_number(*v))
+                .draw()
+                .map_err(|e| e.to_string())?;
+            for (i, ((label, _), pts)) in p.series.iter().zip(outlines).enumerate() {
+                let c = color(i);
                 chart
-                    .configure_mesh()
-                    .x_desc("coefficient value")
-                    .y_desc("density")
-                    .label_style(("sans-serif", 16))
-                    .axis_desc_style(("sans-serif", 18))
-                    .x_labels(6)
-                    // ticks that land on 0 up to round-off read "0"
-                    .x_label_formatter(&|v| short_number(if v.abs() < 1e-9 * r { 0.0 } else { *v }))
-                    .y_label_formatter(&|v| short_number(*v))
-                    .draw()
-                    .map_err(|e| e.to_string())?;
-                for (i, ((label, _), pts)) in p.series.iter().zip(outlines).enumerate() {
-                    let c = color(i);
-                    chart
-                        .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))
-                        .map_err(|e| e.to_string())?
-                        .label(label.as_str())
-                        .legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
-                        });
-                }
-                chart
-                    .configure_series_labels()
-                    .position(SeriesLabelPosition::UpperRight)
-                    .label_font(("sans-serif", 16))
-                    .background_style(WHITE.mix(0.85))
-                    .border_style(BLACK)
-                    .draw()
-                    .map_err(|e| e.to_string())?;
+                    .draw_series(LineSeries::new(pts.iter().copied(), c.stroke_width(2)))
+                    .map_err(|e| e.to_string())?
+                    .label(label.as_str())
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
+                    });
             }
-            root.present().map_err(|e| e.to_string())
-        };
-        draw().map_err(fail)?;
-    }
-    write_png(path, &buf, w, h)
+            draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 16)?;
+        }
+        Ok(())
+    })
 }
 
 /// Size in pixels of one panel of [`curve_grid`].
@@ -446,108 +419,88 @@ pub fn curve_grid(path: impl AsRef<Path>, panels: &[CurvePanel], columns: usize)
     let cols = columns.min(panels.len());
     let (pw, ph) = CURVE_PANEL_SIZE;
     let (w, h) = (pw * cols as u32, ph * rows as u32);
-    let mut buf = vec![255u8; (w as usize) * (h as usize) * 3];
-    {
-        let root = Canvas::new(&mut buf, w, h).into_drawing_area();
-        let draw = || -> std::result::Result<(), String> {
-            root.fill(&WHITE).map_err(|e| e.to_string())?;
-            let areas = root.split_evenly((rows, cols));
-            for (k, p) in panels.iter().enumerate() {
-                let (x0, x1, y0, y1) = ranges[k];
-                let mut builder = ChartBuilder::on(&areas[k]);
-                builder
-                    .caption(&p.title, ("sans-serif", 24))
-                    .margin(12)
-                    .x_label_area_size(45)
-                    .y_label_area_size(70);
-                // one closure per axis kind: plotters' log and linear
-                // coordinates are different types
-                macro_rules! body {
-                    ($chart:expr) => {{
-                        let mut chart = $chart;
+    plot_png(path, (w, h), |root| {
+        let areas = root.split_evenly((rows, cols));
+        for (k, p) in panels.iter().enumerate() {
+            let (x0, x1, y0, y1) = ranges[k];
+            let mut builder = ChartBuilder::on(&areas[k]);
+            builder
+                .caption(&p.title, ("sans-serif", 24))
+                .margin(12)
+                .x_label_area_size(45)
+                .y_label_area_size(70);
+            // one closure per axis kind: plotters' log and linear
+            // coordinates are different types
+            macro_rules! body {
+                ($chart:expr) => {{
+                    let mut chart = $chart;
+                    chart
+                        .configure_mesh()
+                        .x_desc(p.x_label.as_str())
+                        .y_desc(p.y_label.as_str())
+                        .label_style(("sans-serif", 15))
+                        .axis_desc_style(("sans-serif", 16))
+                        .x_label_formatter(&|v| short_number(*v))
+                        .y_label_formatter(&|v| short_number(*v))
+                        .draw()
+                        .map_err(|e| e.to_string())?;
+                    for (v, label) in &p.references {
+                        let grey = RGBColor(120, 120, 120);
+                        let n = 40;
+                        let segments = (0..n).step_by(2).map(|i| {
+                            let at = |j: usize| {
+                                let f = j as f64 / n as f64;
+                                if p.log_x {
+                                    (x0.ln() + f * (x1.ln() - x0.ln())).exp()
+                                } else {
+                                    x0 + f * (x1 - x0)
+                                }
+                            };
+                            PathElement::new(
+                                vec![(at(i), *v), (at(i + 1), *v)],
+                                grey.stroke_width(1),
+                            )
+                        });
                         chart
-                            .configure_mesh()
-                            .x_desc(p.x_label.as_str())
-                            .y_desc(p.y_label.as_str())
-                            .label_style(("sans-serif", 15))
-                            .axis_desc_style(("sans-serif", 16))
-                            .x_label_formatter(&|v| short_number(*v))
-                            .y_label_formatter(&|v| short_number(*v))
-                            .draw()
-                            .map_err(|e| e.to_string())?;
-                        for (v, label) in &p.references {
-                            let grey = RGBColor(120, 120, 120);
-                            let n = 40;
-                            let segments = (0..n).step_by(2).map(|i| {
-                                let at = |j: usize| {
-                                    let f = j as f64 / n as f64;
-                                    if p.log_x {
-                                        (x0.ln() + f * (x1.ln() - x0.ln())).exp()
-                                    } else {
-                                        x0 + f * (x1 - x0)
-                                    }
-                                };
-                                PathElement::new(
-                                    vec![(at(i), *v), (at(i + 1), *v)],
-                                    grey.stroke_width(1),
-                                )
+                            .draw_series(segments)
+                            .map_err(|e| e.to_string())?
+                            .label(format!("{label} ({})", short_number(*v)))
+                            .legend(move |(x, y)| {
+                                PathElement::new(vec![(x, y), (x + 20, y)], grey.stroke_width(1))
                             });
-                            chart
-                                .draw_series(segments)
-                                .map_err(|e| e.to_string())?
-                                .label(format!("{label} ({})", short_number(*v)))
-                                .legend(move |(x, y)| {
-                                    PathElement::new(
-                                        vec![(x, y), (x + 20, y)],
-                                        grey.stroke_width(1),
-                                    )
-                                });
-                        }
-                        for (i, (c, pts)) in p.curves.iter().zip(&kept[k]).enumerate() {
-                            let col = color(i);
-                            chart
-                                .draw_series(LineSeries::new(
-                                    pts.iter().copied(),
-                                    col.stroke_width(2),
-                                ))
-                                .map_err(|e| e.to_string())?
-                                .label(c.label.as_str())
-                                .legend(move |(x, y)| {
-                                    PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2))
-                                });
-                            chart
-                                .draw_series(pts.iter().map(|&q| Circle::new(q, 3, col.filled())))
-                                .map_err(|e| e.to_string())?;
-                        }
+                    }
+                    for (i, (c, pts)) in p.curves.iter().zip(&kept[k]).enumerate() {
+                        let col = color(i);
                         chart
-                            .configure_series_labels()
-                            .position(SeriesLabelPosition::UpperRight)
-                            .label_font(("sans-serif", 14))
-                            .background_style(WHITE.mix(0.85))
-                            .border_style(BLACK)
-                            .draw()
+                            .draw_series(LineSeries::new(pts.iter().copied(), col.stroke_width(2)))
+                            .map_err(|e| e.to_string())?
+                            .label(c.label.as_str())
+                            .legend(move |(x, y)| {
+                                PathElement::new(vec![(x, y), (x + 20, y)], col.stroke_width(2))
+                            });
+                        chart
+                            .draw_series(pts.iter().map(|&q| Circle::new(q, 3, col.filled())))
                             .map_err(|e| e.to_string())?;
-                    }};
-                }
-                if p.log_x {
-                    body!(
-                        builder
-                            .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
-                            .map_err(|e| e.to_string())?
-                    );
-                } else {
-                    body!(
-                        builder
-                            .build_cartesian_2d(x0..x1, y0..y1)
-                            .map_err(|e| e.to_string())?
-                    );
-                }
+                    }
+                    draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 14)?;
+                }};
             }
-            root.present().map_err(|e| e.to_string())
-        };
-        draw().map_err(fail)?;
-    }
-    write_png(path, &buf, w, h)
+            if p.log_x {
+                body!(
+                    builder
+                        .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
+                        .map_err(|e| e.to_string())?
+                );
+            } else {
+                body!(
+                    builder
+                        .build_cartesian_2d(x0..x1, y0..y1)
+                        .map_err(|e| e.to_string())?
+                );
+            }
+        }
+        Ok(())
+    })
 }
 
 /// Width and height in pixels of a [`scatter_plot`].
@@ -639,66 +592,92 @@ pub fn scatter_plot(path: impl AsRef<Path>, plot: &ScatterPlot) -> Result<()> {
         .max(1e-12 * cx.abs().max(cy.abs()).max(1.0))
         * 0.55;
     let (w, h) = SCATTER_PLOT_SIZE;
-    let mut buf = vec![255u8; (w * h * 3) as usize];
+    plot_png(path, (w, h), |root| {
+        let builder = || {
+            let mut b = ChartBuilder::on(root);
+            b.caption(&plot.title, ("sans-serif", 24))
+                .margin(20)
+                .x_label_area_size(60)
+                .y_label_area_size(90);
+            b
+        };
+        // the plotting area's pixels decide the ranges: one scale on both axes
+        let (pw, ph) = builder()
+            .build_cartesian_2d(0.0..1.0, 0.0..1.0)
+            .map_err(|e| e.to_string())?
+            .plotting_area()
+            .dim_in_pixel();
+        let (pw, ph) = (f64::from(pw.max(1)), f64::from(ph.max(1)));
+        let (hx, hy) = if pw >= ph {
+            (half * pw / ph, half)
+        } else {
+            (half, half * ph / pw)
+        };
+        let mut chart = builder()
+            .build_cartesian_2d(cx - hx..cx + hx, cy - hy..cy + hy)
+            .map_err(|e| e.to_string())?;
+        chart
+            .configure_mesh()
+            .x_desc(plot.x_label.as_str())
+            .y_desc(plot.y_label.as_str())
+            .label_style(("sans-serif", 16))
+            .axis_desc_style(("sans-serif", 18))
+            .x_label_formatter(&|v| short_number(*v))
+            .y_label_formatter(&|v| short_number(*v))
+            .draw()
+            .map_err(|e| e.to_string())?;
+        for (i, (s, pts)) in plot.series.iter().zip(&kept).enumerate() {
+            let c = color(i);
+            let r = s.radius.max(1);
+            chart
+                .draw_series(pts.iter().map(|&p| Circle::new(p, r, c.mix(0.85).filled())))
+                .map_err(|e| e.to_string())?
+                .label(s.label.as_str())
+                .legend(move |(x, y)| Circle::new((x + 10, y), r, c.filled()));
+        }
+        draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 16)?;
+        Ok(())
+    })
+}
+
+/// Draws a plot onto a white RGB canvas of `size` pixels with `draw` and
+/// writes it to `path` as a PNG, atomically; `draw`'s error message
+/// becomes [`RenderError::Plot`] naming the path.
+fn plot_png(
+    path: &Path,
+    (w, h): (u32, u32),
+    draw: impl FnOnce(&DrawingArea<Canvas<'_>, Shift>) -> std::result::Result<(), String>,
+) -> Result<()> {
+    let mut buf = vec![255u8; (w as usize) * (h as usize) * 3];
     {
         let root = Canvas::new(&mut buf, w, h).into_drawing_area();
-        let draw = || -> std::result::Result<(), String> {
-            root.fill(&WHITE).map_err(|e| e.to_string())?;
-            let builder = || {
-                let mut b = ChartBuilder::on(&root);
-                b.caption(&plot.title, ("sans-serif", 24))
-                    .margin(20)
-                    .x_label_area_size(60)
-                    .y_label_area_size(90);
-                b
-            };
-            // the plotting area's pixels decide the ranges: one scale on both axes
-            let (pw, ph) = builder()
-                .build_cartesian_2d(0.0..1.0, 0.0..1.0)
-                .map_err(|e| e.to_string())?
-                .plotting_area()
-                .dim_in_pixel();
-            let (pw, ph) = (f64::from(pw.max(1)), f64::from(ph.max(1)));
-            let (hx, hy) = if pw >= ph {
-                (half * pw / ph, half)
-            } else {
-                (half, half * ph / pw)
-            };
-            let mut chart = builder()
-                .build_cartesian_2d(cx - hx..cx + hx, cy - hy..cy + hy)
-                .map_err(|e| e.to_string())?;
-            chart
-                .configure_mesh()
-                .x_desc(plot.x_label.as_str())
-                .y_desc(plot.y_label.as_str())
-                .label_style(("sans-serif", 16))
-                .axis_desc_style(("sans-serif", 18))
-                .x_label_formatter(&|v| short_number(*v))
-                .y_label_formatter(&|v| short_number(*v))
-                .draw()
-                .map_err(|e| e.to_string())?;
-            for (i, (s, pts)) in plot.series.iter().zip(&kept).enumerate() {
-                let c = color(i);
-                let r = s.radius.max(1);
-                chart
-                    .draw_series(pts.iter().map(|&p| Circle::new(p, r, c.mix(0.85).filled())))
-                    .map_err(|e| e.to_string())?
-                    .label(s.label.as_str())
-                    .legend(move |(x, y)| Circle::new((x + 10, y), r, c.filled()));
-            }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .label_font(("sans-serif", 16))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()
-                .map_err(|e| e.to_string())?;
-            root.present().map_err(|e| e.to_string())
-        };
-        draw().map_err(fail)?;
+        root.fill(&WHITE)
+            .map_err(|e| e.to_string())
+            .and_then(|()| draw(&root))
+            .and_then(|()| root.present().map_err(|e| e.to_string()))
+            .map_err(|message| RenderError::Plot {
+                path: path.to_path_buf(),
+                message,
+            })?;
     }
     write_png(path, &buf, w, h)
+}
+
+/// The legend every plot draws: its series' labels at `position` in
+/// `size`-pixel text on a translucent white box with a black border.
+fn draw_legend<'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, Canvas<'a>, CT>,
+    position: SeriesLabelPosition,
+    size: u32,
+) -> std::result::Result<(), String> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .label_font(("sans-serif", size))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| e.to_string())
 }
 
 /// Compact tick label: `0`, `12`, `0.25`, `1.5e-3`, `2e4`.
