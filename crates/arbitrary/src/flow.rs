@@ -164,6 +164,7 @@ impl FlowConfig {
             cond_channels: 4 + k,
             modulation: true,
             head: HeadKind::Njf,
+            global_context: false,
         }
     }
 }

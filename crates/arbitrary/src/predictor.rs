@@ -124,6 +124,7 @@ impl PredictorConfig {
             cond_channels: 0,
             modulation: true,
             head: HeadKind::Linear,
+            global_context: false,
         }
     }
 }

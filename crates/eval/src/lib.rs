@@ -2,6 +2,7 @@
 
 pub mod arbitrary;
 pub mod evaluation;
+pub mod gaussian_baseline;
 pub mod metrics;
 pub mod pictures;
 pub mod plausibility;

@@ -74,6 +74,11 @@
 //!   above 1 beyond the data. Beside it, every shape's place in the
 //!   training shapes' principal plane ([`crate::principal_plane`]), which
 //!   `mfm eval --png` draws.
+//! - **Gaussian baseline**: plausibility, coverage and spread of `|S|`
+//!   draws of the Gaussian with the training shapes' mean and covariance
+//!   ([`crate::gaussian_baseline`], seeded with [`ShapeSets::seed`]),
+//!   measured as the samples' are: what a model that learned only the
+//!   data's first two moments would read. Absent for one training shape.
 //! - **flipped faces**: per sample, the fraction of faces whose normal (the
 //!   unnormalised cross product `(p1 - p0) x (p2 - p0)`) has a negative dot
 //!   product with the same face's normal on the sample's nearest real shape
@@ -146,6 +151,7 @@ use mfm_geometry::TriMesh;
 use mfm_geometry::mesh::{dot, triangle_normal};
 use mfm_geometry::operators::Operators;
 
+use crate::gaussian_baseline::{GaussianBaseline, gaussian_shapes};
 use crate::metrics::{self, DistanceMatrix, MassWeighted};
 use crate::principal_plane::{PlaneProjector, PrincipalPlane};
 use crate::quality::Quartiles;
@@ -282,6 +288,12 @@ pub struct ShapeQuality {
     /// it was measured).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub plane: Option<PrincipalPlane>,
+    /// The same measures for as many draws of the Gaussian fitted to the
+    /// training shapes ([`crate::gaussian_baseline`]): what the data's
+    /// mean and covariance alone achieve (absent with one training shape,
+    /// and in reports written before it was measured).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gaussian: Option<GaussianBaseline>,
     /// Fractions of faces flipped against the nearest real shape.
     pub flipped: FlippedFaces,
     /// The same fractions for the held-out shapes against their nearest
@@ -350,6 +362,14 @@ impl ShapeQuality {
                 self.roughness
             ),
             spread_line(self.spread, self.plane.as_ref()),
+            self.gaussian.map_or(String::new(), |g| {
+                format!(
+                    "the Gaussian fit of the training shapes ({} draws from their mean and \
+                     covariance, measured alike): plausibility {:.2}, coverage {:.2}, spread \
+                     {:.2}; samples should do better",
+                    g.draws, g.plausibility, g.coverage, g.spread
+                )
+            }),
             format!(
                 "flipped faces {:.1}% median, {:.1}% mean, {:.1}% max (faces whose normal \
                  opposes the nearest real shape's: folds, or parts turned by more than a right \
@@ -638,11 +658,7 @@ pub fn shape_quality(sets: &ShapeSets) -> Result<ShapeQuality> {
 
     // coverage: held-out to samples, and to as many random training shapes
     let to_samples: Vec<f64> = (0..n_h)
-        .map(|h| {
-            (0..n_s)
-                .map(|s| sample_real.get(s, n_t + h))
-                .fold(f64::INFINITY, f64::min)
-        })
+        .map(|h| min_over_rows(&sample_real, 0..n_s, n_t + h))
         .collect();
     let baseline_size = n_s.min(n_t);
     let mut rng = ChaCha8Rng::seed_from_u64(sets.seed);
@@ -651,6 +667,27 @@ pub fn shape_quality(sets: &ShapeSets) -> Result<ShapeQuality> {
         .map(|h| min_over(&held_real, h, subset.iter().copied()))
         .collect();
     let (held_out_to_samples, held_out_to_baseline) = (median(&to_samples), median(&to_baseline));
+
+    // the Gaussian fitted to the training shapes, as many draws as samples
+    let gaussian = if n_t >= 2 {
+        let draws = gaussian_shapes(&train, n_s, sets.seed)?;
+        let draw_real = centred.pairwise_centred(&draws, &real)?;
+        let nearest: Vec<f64> = (0..n_s)
+            .map(|s| draw_real.row_min(s).map_or(f64::NAN, |(_, d)| d))
+            .collect();
+        Some(GaussianBaseline {
+            plausibility: median(&nearest) / floor,
+            coverage: median(
+                &(0..n_h)
+                    .map(|h| min_over_rows(&draw_real, 0..n_s, n_t + h))
+                    .collect::<Vec<_>>(),
+            ) / held_out_to_baseline,
+            spread: ratio(median(&to_mean(&draws)), median(&to_mean(&real))),
+            draws: n_s,
+        })
+    } else {
+        None
+    };
 
     // bending energies of every real shape and sample
     let real_energy = bending_energies(sets.mesh, &real)?;
@@ -714,6 +751,7 @@ pub fn shape_quality(sets: &ShapeSets) -> Result<ShapeQuality> {
         novelty: median(&column(|q| q.training_distance)) / floor,
         spread: Some(spread),
         plane: Some(plane.place(&train, &held, &samples)),
+        gaussian,
         flipped,
         held_out_flipped: Some(FlippedFaces::of(&held_out_flips)),
         metrics,
@@ -722,6 +760,12 @@ pub fn shape_quality(sets: &ShapeSets) -> Result<ShapeQuality> {
         num_held_out: n_h,
         per_sample,
     })
+}
+
+/// The smallest entry of column `j` of `m` among the rows `rows`
+/// (infinity for none).
+fn min_over_rows(m: &DistanceMatrix, rows: impl Iterator<Item = usize>, j: usize) -> f64 {
+    rows.map(|i| m.get(i, j)).fold(f64::INFINITY, f64::min)
 }
 
 /// The smallest entry of row `i` of `m` among the columns `cols`

@@ -12,6 +12,7 @@
 #![allow(clippy::unwrap_used)]
 
 use mfm_data::{DataError, InMemorySignals, SignalSource};
+use mfm_eval::gaussian_baseline::gaussian_shapes;
 use mfm_eval::quality::Quartiles;
 use mfm_eval::shape_quality::{CentredDistance, RealSet, ShapeQuality, ShapeSets, shape_quality};
 use mfm_geometry::TriMesh;
@@ -93,6 +94,18 @@ impl Family {
             diagonal: self.diagonal,
             seed: 3,
         })
+    }
+
+    /// `n` new members of the family, each at a random `t` and shift.
+    fn fresh(&mut self, n: usize) -> InMemorySignals {
+        let shapes = (0..n)
+            .map(|_| {
+                let t = self.rng.random_range(-1.0..1.0);
+                let s = shift(&mut self.rng);
+                member(&self.mesh, t, s)
+            })
+            .collect();
+        self.set(shapes)
     }
 
     fn set(&self, shapes: Vec<Vec<f32>>) -> InMemorySignals {
@@ -247,14 +260,8 @@ fn midpoints_of_neighbouring_shapes_are_data_like() -> TestResult {
 #[test]
 fn fresh_members_of_the_family_are_data_like() -> TestResult {
     let mut f = family(1);
-    let fresh: Vec<Vec<f32>> = (0..40)
-        .map(|_| {
-            let t = f.rng.random_range(-1.0..1.0);
-            let s = shift(&mut f.rng);
-            member(&f.mesh, t, s)
-        })
-        .collect();
-    let q = f.judge(&f.set(fresh))?;
+    let fresh = f.fresh(40);
+    let q = f.judge(&fresh)?;
     let s = q.summary();
     // new draws of the data's own distribution: plausibility and novelty
     // 0.46 to 2.47 over the 12 draws; coverage compares 40 samples with 40
@@ -606,5 +613,61 @@ fn pairwise_distances_agree_with_single_ones() -> TestResult {
             assert!((m.get(i, j) - one).abs() <= 1e-12 * one.max(1.0));
         }
     }
+    Ok(())
+}
+
+/// The Gaussian baseline equals draws of `gaussian_shapes` on the centred
+/// training shapes measured by hand, and on the twisted family (a curve,
+/// not a line, of shapes) it reads far less plausible than fresh members:
+/// its draws cut across the curve.
+#[test]
+fn the_gaussian_baseline_is_its_draws_measured_alike() -> TestResult {
+    let mut f = family(2);
+    let fresh = f.fresh(16);
+    let q = f.judge(&fresh)?;
+    let g = q.gaussian.unwrap();
+    assert_eq!(g.draws, 16);
+    // the oracle: the same draws, nearest real shapes by single distances
+    let d = CentredDistance::new(&lumped_mass(&f.mesh), f.diagonal)?;
+    let train = d.centre(&f.train)?;
+    let draws = gaussian_shapes(&train, 16, 3)?;
+    let real: Vec<&[f32]> = (0..f.train.len())
+        .map(|i| f.train.signal(i))
+        .chain((0..f.held_out.len()).map(|i| f.held_out.signal(i)))
+        .collect();
+    let nearest: Vec<f64> = (0..16)
+        .map(|k| {
+            real.iter()
+                .map(|r| d.distance(draws.signal(k), r).unwrap())
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect();
+    let expected = Quartiles::of(&nearest).median / q.floor;
+    let close = |x: f64, y: f64| (x - y).abs() <= 1e-5 * y.abs().max(1.0);
+    assert!(close(g.plausibility, expected), "{g:?} against {expected}");
+    let to_held: Vec<f64> = (0..f.held_out.len())
+        .map(|h| {
+            (0..16)
+                .map(|k| d.distance(draws.signal(k), f.held_out.signal(h)).unwrap())
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect();
+    let expected = Quartiles::of(&to_held).median / q.held_out_to_baseline;
+    assert!(close(g.coverage, expected), "{g:?} against {expected}");
+    // fresh members are data-like, the Gaussian's draws are not
+    assert!(q.plausibility < 1.5, "{}", q.summary());
+    assert!(g.plausibility > 2.0 * q.plausibility, "{}", q.summary());
+    assert!(q.summary().contains("Gaussian fit"), "{}", q.summary());
+    // one training shape has no covariance: no baseline
+    let one = InMemorySignals::new(f.train.signal(0).to_vec(), 1, f.mesh.num_vertices(), 3)?;
+    let q = shape_quality(&ShapeSets {
+        mesh: &f.mesh,
+        train: &one,
+        held_out: &f.held_out,
+        samples: &f.held_out,
+        diagonal: f.diagonal,
+        seed: 3,
+    })?;
+    assert!(q.gaussian.is_none());
     Ok(())
 }

@@ -219,6 +219,12 @@ pub struct ModelConfig {
     /// Needs position signals (3 channels) and no `train.augment`.
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub displacements: bool,
+    /// Give every Poisson block a global view of the shape
+    /// ([`PoissonNetConfig::global_context`]: the surface mean of its hidden
+    /// vertex features, mapped back to every vertex). Default `false`, the
+    /// paper's network; not written to configs when `false`.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub global_context: bool,
 }
 
 /// Largest loss weight `1 / (1 - t)^2` of clean-signal prediction
@@ -238,6 +244,7 @@ impl Default for ModelConfig {
             mean_offset: true,
             prediction: crate::checkpoint::Prediction::Velocity,
             displacements: false,
+            global_context: false,
         }
     }
 }
@@ -265,6 +272,7 @@ impl ModelConfig {
             cond_channels: self.cond_channels(),
             modulation: self.modulation,
             head: self.head,
+            global_context: self.global_context,
         };
         cfg.validate()
             .map_err(|e| FmError::Config(format!("model: {e}")))?;

@@ -391,6 +391,7 @@ impl OfficialConfig {
             cond_channels: if xyz { 4 } else { 1 },
             modulation: m.extra_configs.cmlp_modulate.unwrap_or(true),
             head: HeadKind::Njf,
+            global_context: false,
         }
     }
 
@@ -790,8 +791,8 @@ pub fn import_official(
 ///
 /// # Errors
 /// The final model's integrity check ([`checkpoint::verify_final_model`]);
-/// [`FmError::Config`] for a run with a linear head or conditioning the
-/// official model does not have; the file's errors.
+/// [`FmError::Config`] for a run with a linear head, conditioning or a
+/// global context the official model does not have; the file's errors.
 pub fn export_official(run: &Path, out: &Path) -> Result<usize> {
     checkpoint::verify_final_model(run)?;
     if FlowSpec::read(run.join(FLOW_FILE))?.displacements {
@@ -802,6 +803,12 @@ pub fn export_official(run: &Path, out: &Path) -> Result<usize> {
     }
     let net = PoissonNet::load(run.join(WEIGHTS_FILE), tch::Device::Cpu)?;
     let cfg = net.config();
+    if cfg.global_context {
+        return Err(FmError::Config(format!(
+            "{}: this run's blocks read a global context (model.global_context); the official Matern_FM model has no such layer",
+            run.display()
+        )));
+    }
     if cfg.head != HeadKind::Njf || cfg.in_channels != 3 {
         return Err(FmError::Config(format!(
             "{}: the official Matern_FM model has the njf head on 3-channel signals; this run has the {:?} head on {} channels",

@@ -190,6 +190,7 @@ fn affine_velocity_net(alpha: f64, beta: f64) -> PoissonNet {
         cond_channels: 1,
         modulation: false,
         head: HeadKind::Linear,
+        global_context: false,
     };
     let net = PoissonNet::new(&cfg, Device::Cpu).unwrap();
     tch::no_grad(|| {

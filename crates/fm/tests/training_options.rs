@@ -471,3 +471,47 @@ fn displacement_runs_resume_bit_for_bit_and_refuse_what_is_no_shape() {
             .contains("displacements")
     );
 }
+
+/// `model.global_context`: the run builds blocks with the global map, trains
+/// other weights than the same run without it, resumes bit for bit, reads
+/// from TOML, is written only when set, and is refused by the official
+/// export (the authors' network has no such layer).
+#[test]
+fn global_context_runs_resume_bit_for_bit_and_are_not_exported_as_official() {
+    let mesh = procedural::icosphere(1);
+    let s = signals(&mesh, 4);
+    let mut cfg = tiny(8);
+    let plain = tempfile::tempdir().unwrap();
+    train(plain.path(), cfg.clone(), &mesh, s.clone(), 8);
+    cfg.model.global_context = true;
+    let global = tempfile::tempdir().unwrap();
+    train(global.path(), cfg.clone(), &mesh, s.clone(), 8);
+    let wg = weights(&global.path().join(WEIGHTS_FILE));
+    assert!(wg.contains_key("blocks.0.global.weight"));
+    let learned = wg["blocks.0.global.weight"].iter().any(|&x| x != 0.0);
+    assert!(learned, "the global map never left zero");
+    let w = bits(&wg);
+    assert_ne!(w, bits(&weights(&plain.path().join(WEIGHTS_FILE))));
+    assert_eq!(stopped_and_resumed(cfg.clone(), &mesh, &s, 5), w);
+    assert!(!mfm_fm::train::RESUMABLE_FIELDS.contains(&"model.global_context"));
+    let out = global.path().join("official.ckpt");
+    let e = mfm_fm::official::export_official(global.path(), &out)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("model.global_context"), "{e}");
+    assert!(!out.exists());
+    let c = RunConfig::from_toml_str("[model]\nglobal_context = true\n", "t.toml").unwrap();
+    assert!(c.model.global_context);
+    assert!(c.model.net_config(3).unwrap().global_context);
+    assert!(
+        c.to_toml_string()
+            .unwrap()
+            .contains("global_context = true")
+    );
+    assert!(
+        !RunConfig::default()
+            .to_toml_string()
+            .unwrap()
+            .contains("global_context")
+    );
+}

@@ -70,6 +70,17 @@ pub struct PoissonNetConfig {
     /// The output head.
     #[serde(default)]
     pub head: HeadKind,
+    /// Whether every block also reads a global view of the shape: the
+    /// mass-weighted mean over the whole surface of its first vertex MLP's
+    /// hidden features, through `Linear(W, W)` (no bias), added to every
+    /// vertex's output of that MLP (`blocks.k.global.weight`). A surface
+    /// integral, so it converges under refinement like the rest of the
+    /// network; it gives each vertex what the Poisson solves convey only
+    /// smoothed: which shape the whole surface is becoming. Default `false`
+    /// (the paper's network); not written to JSON when `false`, so earlier
+    /// files read and write unchanged.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub global_context: bool,
 }
 
 fn default_true() -> bool {
@@ -111,6 +122,7 @@ impl PoissonNetConfig {
             cond_channels: 4,
             modulation: true,
             head: HeadKind::Njf,
+            global_context: false,
         }
     }
 
@@ -176,7 +188,8 @@ impl PoissonNetConfig {
         let h = if self.cond_channels > 0 { 3 * w } else { 2 * w };
         let mlp1 = (h * w + w) + (w * w + w);
         let mlp2 = 2 * (w * w + w);
-        self.vector_mlp_parameters(self.width) + mlp1 + mlp2 + 2 * w
+        let global = if self.global_context { w * w } else { 0 };
+        self.vector_mlp_parameters(self.width) + mlp1 + mlp2 + 2 * w + global
     }
 
     /// Parameters of one Poisson block (saturating at `usize::MAX`).
@@ -284,7 +297,8 @@ impl PoissonNetConfig {
             + v * 2 * w * w // last complex layer after the divergence
             + v * mlp1_direct * w
             + v * w * w // MLP1's second layer
-            + 2 * v * w * w; // MLP2
+            + 2 * v * w * w // MLP2
+            + if self.global_context { w * w } else { 0 }; // global context
         let out = self.out_channels as u64;
         let head = match self.head {
             HeadKind::Njf | HeadKind::NjfNoInputGradient => {

@@ -194,6 +194,7 @@ impl PoissonNet {
                     config.vector_layers,
                     config.modulation,
                     conditioned,
+                    config.global_context,
                 )
             })
             .collect();
@@ -623,10 +624,14 @@ fn config_difference(file: &PoissonNetConfig, net: &PoissonNetConfig) -> String 
         }
     };
     let (a, b) = (to_map(file), to_map(net));
-    let diffs: Vec<String> = a
-        .iter()
-        .filter_map(|(k, va)| {
-            let vb = b.get(k)?;
+    // fields left out of the JSON at their default (global_context) are
+    // compared too, read as the default
+    let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+    let default = String::from("its default");
+    let diffs: Vec<String> = keys
+        .into_iter()
+        .filter_map(|k| {
+            let (va, vb) = (a.get(k).unwrap_or(&default), b.get(k).unwrap_or(&default));
             (va != vb)
                 .then(|| format!("{k} = {va} in the file's configuration, {vb} in the network's"))
         })

@@ -29,6 +29,7 @@ fn cuda_forward_and_gradients_match_cpu() {
         cond_channels: 4,
         modulation: true,
         head: HeadKind::Njf,
+        global_context: false,
     };
     tch::manual_seed(9);
     let mut cpu_net = PoissonNet::new(&cfg, Device::Cpu).unwrap();

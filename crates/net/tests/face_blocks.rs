@@ -31,6 +31,7 @@ fn face_blocks_give_the_whole_mesh_network() {
             cond_channels: 4,
             modulation,
             head,
+            global_context: false,
         };
         tch::manual_seed(3);
         let mut net = PoissonNet::new(&cfg, Device::Cpu).unwrap();
@@ -76,6 +77,7 @@ fn net_without_blocks() -> mfm_net::NetError {
         cond_channels: 0,
         modulation: true,
         head: HeadKind::Njf,
+        global_context: false,
     };
     let net = PoissonNet::new(&cfg, Device::Cpu).unwrap();
     let x = Tensor::zeros([1, mt.num_vertices() as i64, 1], (Kind::Float, Device::Cpu));

@@ -11,13 +11,15 @@ use common::{randn, rel_max_diff};
 use faer::sparse::{SparseColMat, Triplet};
 use mfm_geometry::operators::{FaceGradient, Operators};
 use mfm_geometry::{TriMesh, procedural, subdivide};
-use mfm_net::{HeadKind, MeshTensors, PoissonNet, PoissonNetConfig};
+use mfm_net::{HeadKind, MeshTensors, PoissonNet, PoissonNetConfig, PoissonNetOutput};
 use mfm_solver::LaplacianSolver;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use tch::{Device, Kind, Tensor};
 
-fn net(width: usize, blocks: usize, seed: i64) -> PoissonNet {
+/// A double-precision network; with `global`, its global-context maps get
+/// random weights (they start at zero) so that they take part.
+fn net(width: usize, blocks: usize, seed: i64, global: bool) -> PoissonNet {
     tch::manual_seed(seed);
     let cfg = PoissonNetConfig {
         width,
@@ -28,9 +30,20 @@ fn net(width: usize, blocks: usize, seed: i64) -> PoissonNet {
         cond_channels: 2,
         modulation: true,
         head: HeadKind::Njf,
+        global_context: global,
     };
     let mut net = PoissonNet::new(&cfg, Device::Cpu).unwrap();
     net.set_kind(Kind::Double);
+    let mut set = 0;
+    tch::no_grad(|| {
+        for (name, mut t) in net.var_store().variables() {
+            if name.ends_with("global.weight") {
+                t.copy_(&(randn(&t.size()) * 0.5));
+                set += 1;
+            }
+        }
+    });
+    assert_eq!(set, if global { blocks } else { 0 });
     net
 }
 
@@ -59,6 +72,22 @@ fn rotate_frames(g: &SparseColMat<usize, f64>, theta: &[f64]) -> SparseColMat<us
         }
     }
     SparseColMat::try_new_from_triplets(g.nrows(), g.ncols(), &trip).unwrap()
+}
+
+/// The outputs of `net` on the meshes `a` and `b` (one connectivity) for
+/// the same random inputs (a batch of 2: 3 input and 2 conditioning
+/// channels per vertex), and those inputs.
+fn on_both(
+    net: &PoissonNet,
+    a: &MeshTensors,
+    b: &MeshTensors,
+) -> (PoissonNetOutput, PoissonNetOutput, (Tensor, Tensor)) {
+    let v = a.num_vertices() as i64;
+    let x = randn(&[2, v, 3]);
+    let e = randn(&[2, v, 2]);
+    let oa = net.forward(a, &x, Some(&e)).unwrap();
+    let ob = net.forward(b, &x, Some(&e)).unwrap();
+    (oa, ob, (x, e))
 }
 
 /// The same rotation applied to the per-face table of `G` (what
@@ -92,35 +121,32 @@ fn per_face_frame_rotation_leaves_vertex_outputs_unchanged() {
     let a = MeshTensors::from_operators(mesh.faces(), &ops, Arc::clone(&solver)).unwrap();
     let b = MeshTensors::from_operators(mesh.faces(), &rotated, solver).unwrap();
 
-    let net = net(8, 2, 11);
-    let v = mesh.num_vertices() as i64;
-    let x = randn(&[2, v, 3]);
-    let e = randn(&[2, v, 2]);
-    let oa = net.forward(&a, &x, Some(&e)).unwrap();
-    let ob = net.forward(&b, &x, Some(&e)).unwrap();
-    let err = rel_max_diff(&ob.vertex, &oa.vertex);
-    assert!(err < 1e-11, "vertex outputs changed by {err}");
-    // the Jacobian output is the same field expressed in the rotated frames
-    let (ja, jb) = (oa.jacobian.unwrap(), ob.jacobian.unwrap());
-    let nf = mesh.num_faces() as i64;
-    let th = Tensor::from_slice(&theta).reshape([1, nf, 1]);
-    let ja4 = ja.reshape([2, nf, 2, 3]);
-    let (re, im) = (ja4.select(2, 0), ja4.select(2, 1));
-    let rot = Tensor::stack(
-        &[
-            &re * th.cos() - &im * th.sin(),
-            &re * th.sin() + &im * th.cos(),
-        ],
-        2,
-    )
-    .reshape([2, 2 * nf, 3]);
-    let err = rel_max_diff(&jb, &rot);
-    assert!(
-        err < 1e-11,
-        "Jacobian outputs are not the rotated ones: {err}"
-    );
-    // and the rotation is not a no-op on the Jacobian itself
-    assert!(rel_max_diff(&jb, &ja) > 0.1);
+    for global in [false, true] {
+        let (oa, ob, _) = on_both(&net(8, 2, 11, global), &a, &b);
+        let err = rel_max_diff(&ob.vertex, &oa.vertex);
+        assert!(err < 1e-11, "vertex outputs changed by {err}");
+        // the Jacobian output is the same field expressed in the rotated frames
+        let (ja, jb) = (oa.jacobian.unwrap(), ob.jacobian.unwrap());
+        let nf = mesh.num_faces() as i64;
+        let th = Tensor::from_slice(&theta).reshape([1, nf, 1]);
+        let ja4 = ja.reshape([2, nf, 2, 3]);
+        let (re, im) = (ja4.select(2, 0), ja4.select(2, 1));
+        let rot = Tensor::stack(
+            &[
+                &re * th.cos() - &im * th.sin(),
+                &re * th.sin() + &im * th.cos(),
+            ],
+            2,
+        )
+        .reshape([2, 2 * nf, 3]);
+        let err = rel_max_diff(&jb, &rot);
+        assert!(
+            err < 1e-11,
+            "Jacobian outputs are not the rotated ones: {err}"
+        );
+        // and the rotation is not a no-op on the Jacobian itself
+        assert!(rel_max_diff(&jb, &ja) > 0.1);
+    }
 }
 
 fn rotation(axis: [f64; 3], angle: f64) -> [[f64; 3]; 3] {
@@ -153,27 +179,25 @@ fn rigid_motion_leaves_outputs_for_intrinsic_inputs_unchanged() {
     let moved = mesh.with_positions(moved).unwrap();
     let a = MeshTensors::new(&mesh).unwrap();
     let b = MeshTensors::new(&moved).unwrap();
-    let net = net(8, 2, 12);
-    let v = mesh.num_vertices() as i64;
-    // intrinsic inputs: values attached to the vertices, not to the embedding
-    let x = randn(&[2, v, 3]);
-    let e = randn(&[2, v, 2]);
-    let oa = net.forward(&a, &x, Some(&e)).unwrap();
-    let ob = net.forward(&b, &x, Some(&e)).unwrap();
-    let err = rel_max_diff(&ob.vertex, &oa.vertex);
-    assert!(err < 1e-9, "rigid motion changed the outputs by {err}");
-    // the same inputs on a different (non-isometric) shape do change them
-    let squashed = mesh
-        .with_positions(
-            mesh.positions()
-                .iter()
-                .map(|p| [p[0], p[1], 0.3 * p[2]])
-                .collect(),
-        )
-        .unwrap();
-    let c = MeshTensors::new(&squashed).unwrap();
-    let oc = net.forward(&c, &x, Some(&e)).unwrap();
-    assert!(rel_max_diff(&oc.vertex, &oa.vertex) > 1e-3);
+    for global in [false, true] {
+        let net = net(8, 2, 12, global);
+        // intrinsic inputs: values attached to the vertices, not to the embedding
+        let (oa, ob, (x, e)) = on_both(&net, &a, &b);
+        let err = rel_max_diff(&ob.vertex, &oa.vertex);
+        assert!(err < 1e-9, "rigid motion changed the outputs by {err}");
+        // the same inputs on a different (non-isometric) shape do change them
+        let squashed = mesh
+            .with_positions(
+                mesh.positions()
+                    .iter()
+                    .map(|p| [p[0], p[1], 0.3 * p[2]])
+                    .collect(),
+            )
+            .unwrap();
+        let c = MeshTensors::new(&squashed).unwrap();
+        let oc = net.forward(&c, &x, Some(&e)).unwrap();
+        assert!(rel_max_diff(&oc.vertex, &oa.vertex) > 1e-3);
+    }
 }
 
 /// A smooth field on the sphere's neighbourhood: 3 input channels and 2
@@ -219,23 +243,26 @@ fn coarse_vertex_error(coarse: &MeshTensors, uc: &Tensor, uf: &Tensor) -> f64 {
 /// 0.58% on icosphere(2) (h ~ 0.16) and 0.15% on icosphere(3) (h ~ 0.08).
 /// The test asserts below 1% on icosphere(3) and a drop by at least half
 /// between the two levels (second order gives a quarter), so the difference
-/// is discretization error, not a mismatch between triangulations.
+/// is discretization error, not a mismatch between triangulations. The same
+/// holds with the global context (a surface integral, O(h^2) too).
 #[test]
 fn refined_mesh_gives_close_vertex_outputs_for_a_smooth_input() {
-    let net = net(8, 2, 13);
-    let mut errors = Vec::new();
-    for level in [2u32, 3] {
-        let coarse_mesh = procedural::icosphere(level);
-        let fine_mesh = subdivide::midpoint(&coarse_mesh).unwrap();
-        let coarse = MeshTensors::new(&coarse_mesh).unwrap();
-        let fine = MeshTensors::new(&fine_mesh).unwrap();
-        let (xc, ec) = smooth_inputs(&coarse_mesh);
-        let (xf, ef) = smooth_inputs(&fine_mesh);
-        let uc = net.forward(&coarse, &xc, Some(&ec)).unwrap().vertex;
-        let uf = net.forward(&fine, &xf, Some(&ef)).unwrap().vertex;
-        errors.push(coarse_vertex_error(&coarse, &uc, &uf));
+    for global in [false, true] {
+        let net = net(8, 2, 13, global);
+        let mut errors = Vec::new();
+        for level in [2u32, 3] {
+            let coarse_mesh = procedural::icosphere(level);
+            let fine_mesh = subdivide::midpoint(&coarse_mesh).unwrap();
+            let coarse = MeshTensors::new(&coarse_mesh).unwrap();
+            let fine = MeshTensors::new(&fine_mesh).unwrap();
+            let (xc, ec) = smooth_inputs(&coarse_mesh);
+            let (xf, ef) = smooth_inputs(&fine_mesh);
+            let uc = net.forward(&coarse, &xc, Some(&ec)).unwrap().vertex;
+            let uf = net.forward(&fine, &xf, Some(&ef)).unwrap().vertex;
+            errors.push(coarse_vertex_error(&coarse, &uc, &uf));
+        }
+        eprintln!("coarse-vs-refined relative errors (global context {global}): {errors:?}");
+        assert!(errors[1] < 0.01, "{errors:?}");
+        assert!(errors[1] < errors[0] * 0.5, "{errors:?}");
     }
-    eprintln!("coarse-vs-refined relative errors: {errors:?}");
-    assert!(errors[1] < 0.01, "{errors:?}");
-    assert!(errors[1] < errors[0] * 0.5, "{errors:?}");
 }

@@ -81,6 +81,7 @@ fn tiny(width: usize, blocks: usize, head: HeadKind) -> PoissonNetConfig {
         cond_channels: 2,
         modulation: true,
         head,
+        global_context: false,
     }
 }
 
@@ -147,11 +148,22 @@ fn a_block_equals_its_specification_with_the_solve_output_formed() {
     let mesh = procedural::icosphere(2);
     let mt = MeshTensors::new(&mesh).unwrap();
     let v = mt.num_vertices() as i64;
-    for (w, conditioned) in [(6usize, true), (5, false), (64, true)] {
+    for (w, conditioned, global) in [
+        (6usize, true, false),
+        (5, false, false),
+        (64, true, false),
+        (6, true, true),
+        (5, false, true),
+    ] {
         let wi = w as i64;
         let mut vs = nn::VarStore::new(Device::Cpu);
-        let block = PoissonBlock::new(vs.root(), w, 3, true, conditioned);
+        let block = PoissonBlock::new(vs.root(), w, 3, true, conditioned, global);
         vs.double();
+        if global {
+            // the global map starts at zero: give it weights that matter
+            let mut g = vs.variables()["global.weight"].shallow_clone();
+            tch::no_grad(|| g.copy_(&randn(&[wi, wi])));
+        }
         let mut spec_vs = nn::VarStore::new(Device::Cpu);
         let vector = VectorMlp::new(spec_vs.root() / "vector", w, 3, w, true);
         spec_vs.double();
@@ -175,7 +187,18 @@ fn a_block_equals_its_specification_with_the_solve_output_formed() {
                 Some(e) => Tensor::cat(&[&x, &u, e], -1),
                 None => Tensor::cat(&[&x, &u], -1),
             };
-            let x1 = &x + &vars["gamma1"] * lin(&lin(&h, "mlp1.0").gelu("none"), "mlp1.1");
+            let hidden = lin(&h, "mlp1.0").gelu("none");
+            let out = lin(&hidden, "mlp1.1");
+            let out = if global {
+                // the surface integral of the hidden features over the area
+                let m = mt.mass().view([1, v, 1]);
+                let mean =
+                    (&hidden * &m).sum_dim_intlist(1, true, Kind::Double) / m.sum(Kind::Double);
+                out + mean.matmul(&vars["global.weight"].tr())
+            } else {
+                out
+            };
+            let x1 = &x + &vars["gamma1"] * out;
             &x1 + &vars["gamma2"] * lin(&lin(&x1, "mlp2.0").gelu("none"), "mlp2.1")
         };
         let all = || {
@@ -216,6 +239,10 @@ fn a_block_equals_its_specification_with_the_solve_output_formed() {
         let (specified, spec_grads) = run(false);
         let err = rel_max_diff(&built, &specified);
         assert!(err < 1e-12, "W{w}: values differ by {err}");
+        assert_eq!(
+            built_grads.iter().any(|(n, _)| n == "global.weight"),
+            global
+        );
         assert!(built_grads.len() > 15);
         for ((name, a), (_, b)) in built_grads.iter().zip(&spec_grads) {
             let err = rel_max_diff(a, b);
@@ -232,8 +259,10 @@ fn one_block_passes_finite_difference_checks() {
     let v = mt.num_vertices() as i64;
     let w = 5;
     let mut vs = nn::VarStore::new(Device::Cpu);
-    let block = PoissonBlock::new(vs.root(), w, 3, true, true);
+    let block = PoissonBlock::new(vs.root(), w, 3, true, true, true);
     vs.double();
+    let mut g = vs.variables()["global.weight"].shallow_clone();
+    tch::no_grad(|| g.copy_(&randn(&[w as i64, w as i64])));
     let r = randn(&[2, v, w as i64]);
     let x = randn(&[2, v, w as i64]);
     let e = randn(&[2, v, w as i64]);
@@ -450,4 +479,64 @@ fn save_and_load_round_trip_and_mismatch_is_reported() {
     assert!(msg.contains("missing in the file: blocks.2."), "{msg}");
     // wrong extension
     assert!(net.save(dir.path().join("model.pt")).is_err());
+}
+
+#[test]
+fn a_global_context_starts_as_the_plain_network_and_is_saved_only_when_on() {
+    let plain = tiny(6, 2, HeadKind::Njf);
+    let global = PoissonNetConfig {
+        global_context: true,
+        ..plain.clone()
+    };
+    // one W x W map per block, counted by the formula and the built network
+    assert_eq!(global.num_parameters(), plain.num_parameters() + 2 * 36);
+    tch::manual_seed(4);
+    let a = PoissonNet::new(&plain, Device::Cpu).unwrap();
+    tch::manual_seed(4);
+    let b = PoissonNet::new(&global, Device::Cpu).unwrap();
+    assert_eq!(b.num_parameters(), global.num_parameters());
+    assert_eq!(b.summary().total, global.num_parameters());
+    // the maps start at zero and draw no random numbers: same function
+    let mesh = procedural::icosphere(1);
+    let mt = MeshTensors::new(&mesh).unwrap();
+    let v = mt.num_vertices() as i64;
+    let x = Tensor::randn([2, v, 3], (Kind::Float, Device::Cpu));
+    let e = Tensor::randn([2, v, 2], (Kind::Float, Device::Cpu));
+    let ya = a.forward(&mt, &x, Some(&e)).unwrap().vertex;
+    let yb = b.forward(&mt, &x, Some(&e)).unwrap().vertex;
+    assert_eq!(rel_max_diff(&ya, &yb), 0.0);
+    // ... but they learn: the loss reaches them
+    (yb * Tensor::randn([2, v, 3], (Kind::Float, Device::Cpu)))
+        .sum(Kind::Float)
+        .backward();
+    let vars = b.var_store().variables();
+    for k in 0..2 {
+        let g = vars[&format!("blocks.{k}.global.weight")].grad();
+        assert!(
+            g.abs().sum(Kind::Double).double_value(&[]) > 0.0,
+            "block {k}"
+        );
+    }
+    // the plain configuration's JSON has no such key (earlier files read
+    // and write unchanged); the global one round-trips
+    let json = serde_json::to_string(&plain).unwrap();
+    assert!(!json.contains("global_context"), "{json}");
+    let json = serde_json::to_string(&global).unwrap();
+    assert_eq!(
+        serde_json::from_str::<PoissonNetConfig>(&json).unwrap(),
+        global
+    );
+    // loading a global model's file into a plain network names the field
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("model.safetensors");
+    b.save(&path).unwrap();
+    assert_eq!(PoissonNet::read_config(&path).unwrap(), global);
+    let mut other = PoissonNet::new(&plain, Device::Cpu).unwrap();
+    let msg = other.load_weights(&path).unwrap_err().to_string();
+    assert!(
+        msg.contains(
+            "global_context = true in the file's configuration, its default in the network's"
+        ),
+        "{msg}"
+    );
 }

@@ -42,6 +42,7 @@ fn tiny_network_overfits_one_deformation() {
         cond_channels: 4,
         modulation: true,
         head: HeadKind::Njf,
+        global_context: false,
     };
     let net = PoissonNet::new(&cfg, Device::Cpu).unwrap();
     let mut opt = nn::Adam::default().build(net.var_store(), 1e-2).unwrap();

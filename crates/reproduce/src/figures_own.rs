@@ -10,7 +10,7 @@
 //! 3. `mfm sample` of `--samples` shapes on the reference mesh (PLY files
 //!    of the first four);
 //! 4. `mfm eval` against the experiment: the generator-free measures
-//!    (plausibility, coverage, roughness, novelty, spread, flipped faces,
+//!    (plausibility, coverage, roughness, novelty, spread, the Gaussian fit, flipped faces,
 //!    MMD / COV / 1-NNA), the picture of samples beside their nearest real
 //!    shapes and the one of every shape in the training shapes' principal
 //!    plane.
@@ -229,9 +229,9 @@ fn write_report(args: &OwnArgs, rows: &[Row], seconds: f64) -> String {
     let _ = writeln!(
         s,
         "| data | train / held out | template V | reference V | plausibility | coverage | \
-         roughness | flipped (median / max; the data's max) | novelty | spread | MMD | COV | \
-         1-NNA | train s | sample s |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+         roughness | flipped (median / max; the data's max) | novelty | spread | Gaussian fit: \
+         plausibility / coverage / spread | MMD | COV | 1-NNA | train s | sample s |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for r in rows {
         let Some(q) = &r.report.shape_quality else {
@@ -241,7 +241,7 @@ fn write_report(args: &OwnArgs, rows: &[Row], seconds: f64) -> String {
         let _ = writeln!(
             s,
             "| {} | {} / {} | {} | {} | {:.2} | {:.2} | {:.2} | {:.1}% / {:.1}%; {} | {:.2} | \
-             {} | {:.4} | {:.2} | {:.2} | {:.0} | {:.0} |",
+             {} | {} | {:.4} | {:.2} | {:.2} | {:.0} | {:.0} |",
             r.name,
             r.import.train,
             r.import.held_out,
@@ -256,6 +256,10 @@ fn write_report(args: &OwnArgs, rows: &[Row], seconds: f64) -> String {
                 .map_or("-".to_owned(), |d| format!("{:.1}%", 100.0 * d.max)),
             q.novelty,
             q.spread.map_or("-".to_owned(), |x| format!("{x:.2}")),
+            q.gaussian.map_or("-".to_owned(), |g| format!(
+                "{:.2} / {:.2} / {:.2}",
+                g.plausibility, g.coverage, g.spread
+            )),
             q.metrics.mmd,
             q.metrics.cov,
             q.metrics.one_nna,
@@ -271,7 +275,9 @@ fn write_report(args: &OwnArgs, rows: &[Row], seconds: f64) -> String {
          over the template's diagonal; plausibility, coverage and novelty are ratios to the \
          data's floor (a held-out shape's distance to the nearest training shape). Spread: \
          a sample's distance to the training shapes' mean over a real shape's (medians; below \
-         1: samples pulled toward the mean shape, blends of shapes).\n"
+         1: samples pulled toward the mean shape, blends of shapes). Gaussian fit: the same \
+         measures for as many draws from the training shapes' mean and covariance, what a \
+         model of the data's first two moments reaches; samples should do better.\n"
     );
     for r in rows {
         let _ = writeln!(

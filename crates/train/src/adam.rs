@@ -215,6 +215,7 @@ mod tests {
             cond_channels: 1,
             modulation: true,
             head: HeadKind::Njf,
+            global_context: false,
         };
         let make = || {
             let _g = INIT_LOCK.lock().unwrap_or_else(|p| p.into_inner());

@@ -11,7 +11,9 @@ use mfm_kernels::profile::section;
 use super::{Mlp, VectorMlp, dense, gelu};
 
 /// One Poisson block (docs/network.md, "Blocks"): gradient, vector MLP, Poisson
-/// solve with the mean removed, then two LayerScale vertex MLPs.
+/// solve with the mean removed, then two LayerScale vertex MLPs; with a
+/// global context, the first vertex MLP's output also gets a linear map of
+/// its hidden features' mass-weighted mean over the surface.
 #[derive(Debug)]
 pub struct PoissonBlock {
     vector: VectorMlp,
@@ -19,26 +21,34 @@ pub struct PoissonBlock {
     mlp2: Mlp,
     gamma1: Tensor,
     gamma2: Tensor,
+    /// `Linear(W, W)` without bias reading the surface mean of MLP1's hidden
+    /// features (`[W_out, W_in]`), when the block has a global context.
+    global: Option<Tensor>,
 }
 
 impl PoissonBlock {
     /// Creates a block of width `width` under `p` (`vector`, `mlp1`, `mlp2`,
-    /// `gamma1`, `gamma2`); `conditioned` adds the conditioning features to
-    /// the first vertex MLP's input.
+    /// `gamma1`, `gamma2`, and `global.weight` with `global`);
+    /// `conditioned` adds the conditioning features to the first vertex
+    /// MLP's input. The global map starts at zero, so a new block computes
+    /// what it would without it.
     pub fn new(
         p: nn::Path<'_>,
         width: usize,
         layers: usize,
         modulation: bool,
         conditioned: bool,
+        global: bool,
     ) -> Self {
         let h = if conditioned { 3 * width } else { 2 * width };
+        let w = width as i64;
         Self {
             vector: VectorMlp::new(&p / "vector", width, layers, width, modulation),
             mlp1: Mlp::new(&p / "mlp1", h, width, width),
             mlp2: Mlp::new(&p / "mlp2", width, width, width),
-            gamma1: p.ones("gamma1", &[width as i64]),
-            gamma2: p.ones("gamma2", &[width as i64]),
+            gamma1: p.ones("gamma1", &[w]),
+            gamma2: p.ones("gamma2", &[w]),
+            global: global.then(|| p.sub("global").zeros("weight", &[w, w])),
         }
     }
 
@@ -109,8 +119,31 @@ impl PoissonBlock {
             None => (x.shallow_clone(), l1.ws.narrow(1, 0, w)),
         };
         let pre = mfm_kernels::dense::linear(&input, &a, l1.bs.as_ref())? + ub;
-        let x = x + &self.gamma1 * dense(&self.mlp1.l2, &gelu(&pre))?;
+        let hidden = gelu(&pre);
+        let out = dense(&self.mlp1.l2, &hidden)?;
+        let out = match &self.global {
+            // one vector per batch item, the same for every vertex
+            Some(g) => out + mfm_kernels::dense::linear(&surface_mean(&hidden, mesh)?, g, None)?,
+            None => out,
+        };
+        let x = x + &self.gamma1 * out;
         let x = &x + &self.gamma2 * self.mlp2.forward(&x)?;
         Ok(x)
     }
+}
+
+/// Mass-weighted mean over the whole surface (all components together) of
+/// `h: [B, V, C]`, as `[B, 1, C]`.
+fn surface_mean(h: &Tensor, mesh: &MeshTensors) -> Result<Tensor> {
+    let v = mesh.num_vertices() as i64;
+    let mass = mesh.mass().to_kind(h.kind()).to_device(h.device()) / mesh.total_area();
+    let size = h.size();
+    if size.len() != 3 || size[1] != v {
+        return Err(shape_error(
+            "global context features",
+            format!("[B, {v}, C]"),
+            h,
+        ));
+    }
+    Ok(mass.view([1, 1, v]).matmul(h))
 }
