@@ -39,6 +39,8 @@ use serde::{Deserialize, Serialize};
 
 use mfm_data::{DataError, InMemorySignals, Result, SignalSource};
 
+use crate::shape_quality::mean_signal;
+
 /// The Gaussian baseline's measures, each defined as the samples' are
 /// ([`crate::shape_quality`] module docs), for as many draws as samples.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -78,14 +80,7 @@ pub fn gaussian_shapes(
              and {count}"
         )));
     }
-    let size = train.signal(0).len();
-    let mut mean = vec![0.0f64; size];
-    for i in 0..n {
-        for (m, &x) in mean.iter_mut().zip(train.signal(i)) {
-            *m += f64::from(x);
-        }
-    }
-    mean.iter_mut().for_each(|m| *m /= n as f64);
+    let mean = mean_signal(train);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     rng.set_stream(1);
     let scale = 1.0 / ((n - 1) as f64).sqrt();

@@ -65,6 +65,8 @@ use serde::{Deserialize, Serialize};
 
 use mfm_data::{DataError, InMemorySignals, Result, SignalSource};
 
+use crate::shape_quality::mean_signal;
+
 /// Most training shapes whose Gram matrix the plane is fitted on; beyond,
 /// a seeded random subset of this many.
 pub const PLANE_FIT_SHAPES: usize = 512;
@@ -139,13 +141,7 @@ impl PlaneProjector {
         let weights: Vec<f64> = mass.iter().map(|m| m / total).collect();
         let n_values = 3 * mass.len();
 
-        let mut mean = vec![0.0; n_values];
-        for i in 0..train.len() {
-            for (m, &x) in mean.iter_mut().zip(train.signal(i)) {
-                *m += f64::from(x);
-            }
-        }
-        mean.iter_mut().for_each(|m| *m /= train.len() as f64);
+        let mean = mean_signal(train);
 
         let mut fitted: Vec<usize> = (0..train.len()).collect();
         if train.len() > PLANE_FIT_SHAPES {

@@ -22,8 +22,7 @@ use std::path::Path;
 
 use mfm_data::{InMemorySignals, SignalSource};
 use mfm_fm::config::OdeMethod;
-use mfm_fm::path::ode_step;
-use mfm_fm::sample::Sampler;
+use mfm_fm::sample::{SampleOptions, Sampler};
 use tch::{Device, Tensor};
 
 fn main() -> Result<(), Box<dyn Error>> {
@@ -33,11 +32,6 @@ fn main() -> Result<(), Box<dyn Error>> {
     };
     let t0: f64 = t0.parse().map_err(|e| format!("T0 {t0:?}: {e}"))?;
     let steps: usize = steps.parse().map_err(|e| format!("STEPS {steps:?}: {e}"))?;
-    if !(0.0..1.0).contains(&t0) || steps == 0 {
-        return Err(
-            format!("T0 must be in [0, 1) and STEPS at least 1, found {t0} and {steps}").into(),
-        );
-    }
     let sampler = Sampler::load(run, Some(Device::Cpu))?;
     if !sampler.flow().positions || sampler.flow().displacements {
         return Err(format!(
@@ -68,14 +62,13 @@ fn main() -> Result<(), Box<dyn Error>> {
         x1 = target.mesh_tensors().remove_mass_mean(&x1)?;
     }
     let x0 = sampler.noise(&target, 0, n, 0)?;
-    let mut x = x0 * (1.0 - t0) + x1 * t0;
-    let h = (1.0 - t0) / steps as f64;
-    for k in 0..steps {
-        let t = t0 + k as f64 * h;
-        x = ode_step(OdeMethod::Midpoint, &x, t, h, |x, t| {
-            sampler.velocity(&target, x, t)
-        })?;
-    }
+    let xt = x0 * (1.0 - t0) + x1 * t0;
+    let options = SampleOptions {
+        steps,
+        method: OdeMethod::Midpoint,
+        ..SampleOptions::default()
+    };
+    let x = sampler.integrate_from(&target, &xt, t0, &options)?;
     let y = sampler.finish(&target, &x).contiguous().view([-1]);
     let values = Vec::<f32>::try_from(&y)?;
     mfm_files::npy::write(out, &values, &[n as u64, v as u64, 3])?;

@@ -905,6 +905,30 @@ impl Sampler {
         self.integrate_reporting(target, x0, options, &|| {})
     }
 
+    /// Integrates a state `x: [B, V, C]` at time `t0` (in `[0, 1)`) to
+    /// `t = 1` with `options.steps` equal steps of `options.method`: the
+    /// flow from a point part of the way along the path, e.g. a real shape
+    /// noised to `t0` (`(1 - t0) x0 + t0 x1`, in the run's frame and
+    /// centred as in training). `t0 = 0` is [`Sampler::integrate`].
+    ///
+    /// # Errors
+    /// As [`Sampler::integrate`]; [`FmError::Config`] for `t0` outside
+    /// `[0, 1)`.
+    pub fn integrate_from(
+        &self,
+        target: &TargetMesh,
+        x: &Tensor,
+        t0: f64,
+        options: &SampleOptions,
+    ) -> Result<Tensor> {
+        if !(0.0..1.0).contains(&t0) {
+            return Err(FmError::Config(format!(
+                "the ODE starts at a time in [0, 1), found {t0}"
+            )));
+        }
+        self.integrate_over(target, x, t0, options, &|| {})
+    }
+
     /// [`Sampler::integrate`] that calls `on_step()` after every step.
     ///
     /// # Errors
@@ -916,12 +940,25 @@ impl Sampler {
         options: &SampleOptions,
         on_step: &dyn Fn(),
     ) -> Result<Tensor> {
+        self.integrate_over(target, x0, 0.0, options, on_step)
+    }
+
+    /// The integration from `t0` to 1 behind [`Sampler::integrate_reporting`]
+    /// and [`Sampler::integrate_from`].
+    fn integrate_over(
+        &self,
+        target: &TargetMesh,
+        x0: &Tensor,
+        t0: f64,
+        options: &SampleOptions,
+        on_step: &dyn Fn(),
+    ) -> Result<Tensor> {
         if options.steps == 0 {
             return Err(FmError::Config(
                 "sampling needs at least one ODE step".into(),
             ));
         }
-        let h = 1.0 / options.steps as f64;
+        let h = (1.0 - t0) / options.steps as f64;
         let mut x = x0.shallow_clone();
         // A state that overflowed would reach the Poisson solves as NaN; say
         // where the integration broke down instead.
@@ -944,7 +981,7 @@ impl Sampler {
             })
         };
         for k in 0..options.steps {
-            let t = k as f64 * h;
+            let t = t0 + k as f64 * h;
             x = crate::path::ode_step(options.method, &x, t, h, |x, t| velocity(x, t, k))?;
             on_step();
         }

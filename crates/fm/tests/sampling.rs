@@ -285,17 +285,54 @@ fn every_ode_step_of_every_batch_is_reported_and_changes_nothing() {
     }
 }
 
+/// A sampler whose velocity is `a x + bias` plus the flow's `offset`, on a
+/// matern noise of `tau = 10`.
+fn affine_sampler(a: f64, bias: f64, offset: f64) -> Sampler {
+    Sampler::new(
+        affine_velocity_net(a, bias),
+        flow(NoiseKind::Matern { tau: 10.0 }, offset),
+    )
+    .unwrap()
+}
+
+/// `steps` steps of length `h` of `method` on `dx/dt = a x + b` from
+/// `start`, in f64.
+fn affine_steps(
+    start: &[f64],
+    a: f64,
+    b: f64,
+    h: f64,
+    steps: usize,
+    method: OdeMethod,
+) -> Vec<f64> {
+    let (gain, shift) = match method {
+        OdeMethod::Euler => (1.0 + a * h, b * h),
+        OdeMethod::Midpoint => (
+            1.0 + a * h + a * a * h * h / 2.0,
+            b * h * (1.0 + a * h / 2.0),
+        ),
+    };
+    let mut x = start.to_vec();
+    for _ in 0..steps {
+        x.iter_mut().for_each(|v| *v = gain * *v + shift);
+    }
+    x
+}
+
+fn max_err(got: &[f64], want: &[f64]) -> f64 {
+    got.iter()
+        .zip(want)
+        .map(|(g, w)| (g - w).abs())
+        .fold(0.0, f64::max)
+}
+
 #[test]
 fn euler_and_midpoint_match_their_recurrences_and_converge_at_their_orders() {
     // dx/dt = a x + b (b = head bias + velocity offset), x(1) = (x0 + b/a) e^a - b/a
     let (a, bias, offset) = (0.8, 0.25, 0.15);
     let b = bias + offset;
     let mesh = procedural::icosphere(1);
-    let sampler = Sampler::new(
-        affine_velocity_net(a, bias),
-        flow(NoiseKind::Matern { tau: 10.0 }, offset),
-    )
-    .unwrap();
+    let sampler = affine_sampler(a, bias, offset);
     let target = sampler.prepare(&mesh).unwrap();
     let x0 = sampler.noise(&target, 0, 2, 1).unwrap();
     let start = values(&x0);
@@ -303,29 +340,11 @@ fn euler_and_midpoint_match_their_recurrences_and_converge_at_their_orders() {
         .iter()
         .map(|x| (x + b / a) * a.exp() - b / a)
         .collect();
-    let max_err = |got: &[f64], want: &[f64]| {
-        got.iter()
-            .zip(want)
-            .map(|(g, w)| (g - w).abs())
-            .fold(0.0, f64::max)
-    };
     let mut errors = Vec::new();
     for method in [OdeMethod::Euler, OdeMethod::Midpoint] {
         let mut per_steps = Vec::new();
         for steps in [8usize, 16] {
-            let h = 1.0 / steps as f64;
-            // one step of each method on the affine field, in f64
-            let (gain, shift) = match method {
-                OdeMethod::Euler => (1.0 + a * h, b * h),
-                OdeMethod::Midpoint => (
-                    1.0 + a * h + a * a * h * h / 2.0,
-                    b * h * (1.0 + a * h / 2.0),
-                ),
-            };
-            let mut want = start.clone();
-            for _ in 0..steps {
-                want.iter_mut().for_each(|x| *x = gain * *x + shift);
-            }
+            let want = affine_steps(&start, a, b, 1.0 / steps as f64, steps, method);
             let opts = SampleOptions {
                 steps,
                 method,
@@ -350,6 +369,57 @@ fn euler_and_midpoint_match_their_recurrences_and_converge_at_their_orders() {
         "{midpoint:?}"
     );
     assert!(midpoint[1] < euler[1] / 10.0);
+}
+
+/// `integrate_from(x, t0)` integrates the rest of the path: from `t0 = 0`
+/// it is `integrate` bit for bit, from `t0 = 0.5` its steps are `0.5 /
+/// steps` long (the midpoint recurrence on the affine field, and the exact
+/// solution `(x + b/a) e^{a (1 - t0)} - b/a` as the steps grow), and a
+/// start at `t = 1` or beyond is refused.
+#[test]
+fn integrating_from_part_of_the_way_takes_the_rest_of_the_path() {
+    let (a, bias, offset) = (0.8, 0.25, 0.15);
+    let b = bias + offset;
+    let mesh = procedural::icosphere(1);
+    let sampler = affine_sampler(a, bias, offset);
+    let target = sampler.prepare(&mesh).unwrap();
+    let x = sampler.noise(&target, 0, 2, 3).unwrap();
+    let opts = |steps| SampleOptions {
+        steps,
+        method: OdeMethod::Midpoint,
+        batch: 2,
+    };
+    assert_eq!(
+        values(&sampler.integrate_from(&target, &x, 0.0, &opts(4)).unwrap()),
+        values(&sampler.integrate(&target, &x, &opts(4)).unwrap())
+    );
+    let t0 = 0.5;
+    let start = values(&x);
+    for steps in [4usize, 64] {
+        let h = (1.0 - t0) / steps as f64;
+        let want = affine_steps(&start, a, b, h, steps, OdeMethod::Midpoint);
+        let got = values(
+            &sampler
+                .integrate_from(&target, &x, t0, &opts(steps))
+                .unwrap(),
+        );
+        let err = max_err(&got, &want);
+        assert!(err < 1e-5, "{steps} steps: {err}");
+    }
+    let exact: Vec<f64> = start
+        .iter()
+        .map(|v| (v + b / a) * (a * (1.0 - t0)).exp() - b / a)
+        .collect();
+    let got = values(&sampler.integrate_from(&target, &x, t0, &opts(64)).unwrap());
+    let err = max_err(&got, &exact);
+    assert!(err < 1e-4, "against the exact solution: {err}");
+    for bad in [1.0, 1.5, -0.1] {
+        let e = sampler
+            .integrate_from(&target, &x, bad, &opts(4))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("[0, 1)"), "{e}");
+    }
 }
 
 #[test]
