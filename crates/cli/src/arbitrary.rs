@@ -19,9 +19,9 @@ use std::sync::atomic::AtomicBool;
 /// Runs `mfm train --mode predictor|arbitrary`; returns whether `stop`
 /// ended it (the caller exits with 130).
 pub fn train(a: &TrainArgs, kind: RunKind, stop: &AtomicBool) -> Result<bool> {
-    if a.noise.is_some() {
+    if a.noise.is_some() || a.noise_scale.is_some() || a.prior.is_some() {
         bail!(
-            "--noise is an option of --mode flow (the arbitrary-source flow's noise is its configuration's)"
+            "--noise, --noise-scale and --prior are options of --mode flow (the arbitrary-source flow's noise is its configuration's)"
         );
     }
     if kind == RunKind::Predictor && (a.predictor.is_some() || a.no_eigenvectors) {

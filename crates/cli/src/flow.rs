@@ -22,9 +22,15 @@ pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<bool> {
         bail!("--predictor and --no-eigenvectors are options of --mode arbitrary");
     }
     let run = if a.resume {
-        if a.config.is_some() || a.preset.is_some() || a.noise.is_some() || a.seed.is_some() {
+        if a.config.is_some()
+            || a.preset.is_some()
+            || a.noise.is_some()
+            || a.noise_scale.is_some()
+            || a.prior.is_some()
+            || a.seed.is_some()
+        {
             bail!(
-                "--resume continues with the run's own {CONFIG_FILE}; drop --config/--preset/--noise/--seed"
+                "--resume continues with the run's own {CONFIG_FILE}; drop --config/--preset/--noise/--noise-scale/--prior/--seed"
             );
         }
         if !a.out.is_dir() {
@@ -80,6 +86,8 @@ pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<bool> {
             steps: a.steps,
             seed: a.seed,
             noise: a.noise,
+            noise_scale: a.noise_scale,
+            prior: a.prior,
             device: a.device,
         };
         let run = RunFolder::start(&a.out, overrides.apply(config)?)?;
@@ -100,6 +108,14 @@ pub fn train(a: &TrainArgs, stop: &AtomicBool) -> Result<bool> {
     );
     if let Some(line) = t.flow().frame_summary() {
         println!("{line}");
+    }
+    if let Some(p) = &t.flow().prior {
+        println!(
+            "prior: a Gaussian fit of {} training signals, {} principal directions ({}) added to every noise sample",
+            p.fitted_on,
+            p.directions,
+            mfm_fm::prior::PRIOR_FILE
+        );
     }
     let summary = run.train(stop, !a.quiet)?;
     println!("{}", summary.line());

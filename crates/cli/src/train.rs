@@ -33,8 +33,10 @@ pub struct TrainArgs {
     #[arg(long, conflicts_with = "preset")]
     pub(crate) config: Option<PathBuf>,
     /// Named configuration: `cpu` (scalar signals, minutes on a laptop),
-    /// `cpu-deform` (shapes: `cpu` conditioned on the source xyz, 3000
-    /// steps, for `mfm dataset deform` and `mfm dataset import` data), `paper` (the authors' human-pose recipe, for a GPU) or
+    /// `cpu-deform` (shapes: `cpu` conditioned on the source xyz, starting
+    /// from the data's Gaussian fit plus fainter noise, sigma 1, 3000 steps, for `mfm
+    /// dataset deform` and `mfm dataset import` data), `paper` (the
+    /// authors' human-pose recipe, for a GPU) or
     /// `paper-elastic` (their elastic-deformation recipe). With --mode
     /// predictor or arbitrary: `cpu` (default) or `paper` (the official
     /// arbitrary-source configurations).
@@ -71,6 +73,16 @@ pub struct TrainArgs {
     /// much finer meshes), white, naive, explicit:K:TAU.
     #[arg(long)]
     pub(crate) noise: Option<mfm_noise::NoiseKind>,
+    /// Noise amplitude sigma (overrides noise.scale): a number > 0, unit
+    /// (noise of unit RMS) or data (the data's RMS).
+    #[arg(long)]
+    pub(crate) noise_scale: Option<mfm_fm::config::NoiseScale>,
+    /// A distribution added to the noise, fitted on the training data
+    /// (overrides noise.prior): none, or gaussian (the data's mean plus a
+    /// draw with its covariance; the flow then learns only what that
+    /// Gaussian gets wrong; README, "Train on your own shapes").
+    #[arg(long)]
+    pub(crate) prior: Option<mfm_fm::prior::PriorKind>,
     /// Where to train: auto (a GPU when libtorch sees one), cpu or cuda
     /// (overrides train.device; with --resume, continues the run there).
     /// With --mode predictor or arbitrary: the schedule's device, for a new

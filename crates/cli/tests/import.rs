@@ -368,25 +368,67 @@ fn imported_shapes_train_sample_and_come_back_in_the_users_units() {
             "samples",
         ],
     );
-    let a = mfm_files::npy::read::<f32>(&d.join("samples/samples.npy")).unwrap();
     // in the frames' units and place: centred near x = 115, z = -50
-    let v = a.shape[1];
-    let mean_x: f64 = a
-        .values
-        .chunks_exact(3)
-        .map(|p| f64::from(p[0]))
-        .sum::<f64>()
-        / (3 * v) as f64;
-    let mean_z: f64 = a
-        .values
-        .chunks_exact(3)
-        .map(|p| f64::from(p[2]))
-        .sum::<f64>()
-        / (3 * v) as f64;
-    assert!(
-        (mean_x - 115.0).abs() < 10.0 && (mean_z + 50.0).abs() < 10.0,
-        "{mean_x} {mean_z}"
+    let in_place = |file: &str| {
+        let a = mfm_files::npy::read::<f32>(&d.join(file)).unwrap();
+        let n = a.values.len() / 3;
+        let mean = |k: usize| -> f64 {
+            a.values
+                .chunks_exact(3)
+                .map(|p| f64::from(p[k]))
+                .sum::<f64>()
+                / n as f64
+        };
+        let (x, z) = (mean(0), mean(2));
+        assert!(
+            (x - 115.0).abs() < 10.0 && (z + 50.0).abs() < 10.0,
+            "{file}: {x} {z}"
+        );
+    };
+    in_place("samples/samples.npy");
+    // with the data prior (and another noise amplitude): fitted on the 12
+    // training frames, stored with the run, carried to the reference mesh
+    let out = stdout_of(
+        d,
+        &[
+            "train",
+            "--config",
+            "run.toml",
+            "--dataset",
+            "data/train",
+            "--prior",
+            "gaussian",
+            "--noise-scale",
+            "0.5",
+            "--out",
+            "run_prior",
+            "--quiet",
+        ],
     );
+    assert!(
+        out.contains("prior: a Gaussian fit of 12 training signals"),
+        "{out}"
+    );
+    let written = std::fs::read_to_string(d.join("run_prior/config.toml")).unwrap();
+    assert!(
+        written.contains("prior = \"gaussian\"") && written.contains("scale = 0.5"),
+        "{written}"
+    );
+    ok(
+        d,
+        &[
+            "sample",
+            "--run",
+            "run_prior",
+            "--mesh",
+            "data/reference/mesh.ply",
+            "--n",
+            "3",
+            "--out",
+            "samples_prior",
+        ],
+    );
+    in_place("samples_prior/samples.npy");
     let out = stdout_of(
         d,
         &[

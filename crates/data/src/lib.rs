@@ -10,6 +10,7 @@ pub mod import;
 pub mod layout;
 pub mod pairs;
 pub mod pictures;
+pub mod principal;
 pub mod signals;
 pub mod transfer;
 

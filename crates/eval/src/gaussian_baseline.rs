@@ -39,7 +39,7 @@ use serde::{Deserialize, Serialize};
 
 use mfm_data::{DataError, InMemorySignals, Result, SignalSource};
 
-use crate::shape_quality::mean_signal;
+use mfm_data::principal::mean_signal;
 
 /// The Gaussian baseline's measures, each defined as the samples' are
 /// ([`crate::shape_quality`] module docs), for as many draws as samples.

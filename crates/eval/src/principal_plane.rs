@@ -15,7 +15,7 @@
 //! diagonal. With `mu` the mean of the training shapes, the directions
 //! `u_1, u_2` are the leading eigenvectors of the training shapes'
 //! covariance under `<., .>`, found through the Gram matrix
-//! `G_ij = <x_i - mu, x_j - mu>` (its eigenvectors `a_k` with eigenvalues
+//! `G_ij = <x_i - mu, x_j - mu>` ([`mfm_data::principal`]; its eigenvectors `a_k` with eigenvalues
 //! `g_k` give `u_k = sum_i a_ik (x_i - mu) / sqrt(g_k)`, of unit norm). A
 //! shape `y` sits at `c_k(y) = <y - mu, u_k> / D`, in units of the
 //! diagonal: distances in the plane are never longer than the centred
@@ -57,15 +57,13 @@
 //! assert!((plane.explained()[0] - 0.5).abs() < 1e-6);
 //! ```
 
-use faer::{Mat, Side};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use mfm_data::principal::PrincipalComponents;
 use mfm_data::{DataError, InMemorySignals, Result, SignalSource};
-
-use crate::shape_quality::mean_signal;
 
 /// Most training shapes whose Gram matrix the plane is fitted on; beyond,
 /// a seeded random subset of this many.
@@ -92,14 +90,8 @@ pub struct PrincipalPlane {
 /// of the same mesh in the plane ([module docs](self)).
 #[derive(Clone, Debug)]
 pub struct PlaneProjector {
-    /// Vertex weights summing to 1.
-    weights: Vec<f64>,
-    /// `mu`, `V x 3` values.
-    mean: Vec<f64>,
-    /// `u_1, u_2`, each `V x 3` values of unit norm (or zero).
-    directions: [Vec<f64>; 2],
-    explained: [f64; 2],
-    fitted_on: usize,
+    /// `mu` and the leading directions (at most two) under the weights.
+    components: PrincipalComponents,
     diagonal: f64,
 }
 
@@ -138,87 +130,26 @@ impl PlaneProjector {
                  found {diagonal}"
             )));
         }
-        let weights: Vec<f64> = mass.iter().map(|m| m / total).collect();
-        let n_values = 3 * mass.len();
-
-        let mean = mean_signal(train);
-
         let mut fitted: Vec<usize> = (0..train.len()).collect();
         if train.len() > PLANE_FIT_SHAPES {
             let mut rng = ChaCha8Rng::seed_from_u64(seed);
             fitted = rand::seq::index::sample(&mut rng, train.len(), PLANE_FIT_SHAPES).into_vec();
             fitted.sort_unstable();
         }
-        let n = fitted.len();
-        // the fitted shapes minus the mean, weighted by sqrt(w) so that the
-        // inner product is the plain dot product
-        let scaled: Vec<Vec<f64>> = fitted
-            .par_iter()
-            .map(|&i| {
-                train
-                    .signal(i)
-                    .iter()
-                    .zip(&mean)
-                    .enumerate()
-                    .map(|(j, (&x, m))| (f64::from(x) - m) * weights[j / 3].sqrt())
-                    .collect()
-            })
-            .collect();
-        let rows: Vec<Vec<f64>> = (0..n)
-            .into_par_iter()
-            .map(|i| (0..=i).map(|j| dot(&scaled[i], &scaled[j])).collect())
-            .collect();
-        let gram = Mat::from_fn(n, n, |i, j| if j <= i { rows[i][j] } else { rows[j][i] });
-        let trace: f64 = (0..n).map(|i| rows[i][i]).sum();
-        let eigen = gram.self_adjoint_eigen(Side::Lower).map_err(|e| {
-            DataError::Config(format!(
-                "the principal plane's eigendecomposition of the {n} x {n} Gram matrix failed: \
-                 {e:?}"
-            ))
-        })?;
-        let (values, vectors) = (eigen.S(), eigen.U());
-
-        let mut directions = [vec![0.0; n_values], vec![0.0; n_values]];
-        let mut explained = [0.0; 2];
-        for (k, direction) in directions.iter_mut().enumerate() {
-            // eigenvalues ascend: the k-th largest is at n - 1 - k
-            let Some(col) = n.checked_sub(1 + k) else {
-                break;
-            };
-            let g = values[col];
-            if !(trace > 0.0 && g > 1e-12 * trace) {
-                continue;
-            }
-            explained[k] = g / trace;
-            let sign = if vectors[(0, col)] < 0.0 { -1.0 } else { 1.0 };
-            let scale = sign / g.sqrt();
-            for (i, row) in scaled.iter().enumerate() {
-                let a = vectors[(i, col)] * scale;
-                // u = sum_i a_i (x_i - mu): undo the sqrt(w) of `scaled`
-                for (j, (u, x)) in direction.iter_mut().zip(row).enumerate() {
-                    let root = weights[j / 3].sqrt();
-                    if root > 0.0 {
-                        *u += a * x / root;
-                    }
-                }
-            }
-        }
+        let components = PrincipalComponents::fit(train, &fitted, mass, 2)?;
         Ok(Self {
-            weights,
-            mean,
-            directions,
-            explained,
-            fitted_on: n,
+            components,
             diagonal,
         })
     }
 
     /// `c(y)`: where the centred shape `y` (`V x 3` values, unchecked
-    /// length) sits in the plane, in units of the diagonal.
+    /// length) sits in the plane, in units of the diagonal (0 along a
+    /// direction without variance).
     pub fn coordinates(&self, shape: &[f32]) -> [f64; 2] {
         let mut c = [0.0; 2];
-        for (k, u) in self.directions.iter().enumerate() {
-            c[k] = self.inner_from_mean(shape, u) / self.diagonal;
+        for (k, ck) in c.iter_mut().enumerate().take(self.components.len()) {
+            *ck = self.components.coordinate(shape, k) / self.diagonal;
         }
         c
     }
@@ -226,23 +157,30 @@ impl PlaneProjector {
     /// The centred distance `d(y, mu)` of the centred shape `y` to the
     /// training shapes' mean, in units of the diagonal.
     pub fn distance_to_mean(&self, shape: &[f32]) -> f64 {
+        let weights = self.components.weights();
         let sq: f64 = shape
             .iter()
-            .zip(&self.mean)
+            .zip(self.components.mean())
             .enumerate()
-            .map(|(j, (&x, m))| self.weights[j / 3] * (f64::from(x) - m).powi(2))
+            .map(|(j, (&x, m))| weights[j / 3] * (f64::from(x) - m).powi(2))
             .sum();
         sq.sqrt() / self.diagonal
     }
 
-    /// Each direction's share of the training shapes' variance.
+    /// Each direction's share of the training shapes' variance (0 for a
+    /// direction without variance).
     pub fn explained(&self) -> [f64; 2] {
-        self.explained
+        let mut e = [0.0; 2];
+        let total = self.components.total_scatter();
+        for (ek, g) in e.iter_mut().zip(self.components.scatter()) {
+            *ek = g / total;
+        }
+        e
     }
 
     /// How many training shapes the directions were fitted on.
     pub fn fitted_on(&self) -> usize {
-        self.fitted_on
+        self.components.fitted_on()
     }
 
     /// The [`PrincipalPlane`] of three sets of centred shapes.
@@ -259,26 +197,11 @@ impl PlaneProjector {
                 .collect()
         };
         PrincipalPlane {
-            explained: self.explained,
-            fitted_on: self.fitted_on,
+            explained: self.explained(),
+            fitted_on: self.fitted_on(),
             train: all(train),
             held_out: all(held_out),
             samples: all(samples),
         }
     }
-
-    /// `<y - mu, u>` with the weights.
-    fn inner_from_mean(&self, shape: &[f32], u: &[f64]) -> f64 {
-        shape
-            .iter()
-            .zip(&self.mean)
-            .zip(u)
-            .enumerate()
-            .map(|(j, ((&x, m), u))| self.weights[j / 3] * (f64::from(x) - m) * u)
-            .sum()
-    }
-}
-
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }

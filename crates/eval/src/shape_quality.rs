@@ -775,20 +775,6 @@ fn min_over(m: &DistanceMatrix, i: usize, cols: impl Iterator<Item = usize>) -> 
 }
 
 /// The median of `values` ([`Quartiles`]).
-/// The mean of the signals of `set` (empty for no values), value by value,
-/// in `f64`.
-pub(crate) fn mean_signal(set: &InMemorySignals) -> Vec<f64> {
-    let n = set.len();
-    let mut mean = vec![0.0f64; set.num_vertices() * set.channels()];
-    for i in 0..n {
-        for (m, &x) in mean.iter_mut().zip(set.signal(i)) {
-            *m += f64::from(x);
-        }
-    }
-    mean.iter_mut().for_each(|m| *m /= n.max(1) as f64);
-    mean
-}
-
 fn median(values: &[f64]) -> f64 {
     Quartiles::of(values).median
 }

@@ -21,6 +21,9 @@ pub const PAIR_SPACE: &str = "pair_space.json";
 pub const RUN_CONFIG: &str = "config.toml";
 /// A flow run's description of its noise and frame.
 pub const RUN_FLOW: &str = "flow.json";
+/// A flow run's data prior (`noise.prior`), written once when training
+/// starts.
+pub const RUN_PRIOR: &str = "prior.safetensors";
 /// A training run's log.
 pub const RUN_LOG: &str = "train_log.csv";
 /// A training run's checkpoints folder.

@@ -8,6 +8,7 @@
 //! run/
 //!   config.toml              the RunConfig the run was started with
 //!   flow.json                FlowSpec: what sampling needs besides the weights
+//!   prior.safetensors        the data prior (runs with noise.prior only; crate::prior)
 //!   train_log.csv            step,loss,lr,grad_norm,seconds (one row per log interval)
 //!   checkpoints/
 //!     step-000001000/        one checkpoint (the newest `keep_checkpoints` are kept)
@@ -100,6 +101,11 @@ pub struct FlowSpec {
     /// training frame). `false` for runs written before the choice existed.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub displacements: bool,
+    /// The data prior every start adds to its noise ([`crate::prior`];
+    /// `noise.prior`), with the size and checksum of its file. `None` for
+    /// runs without one, and not written then.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub prior: Option<crate::prior::PriorSpec>,
 }
 
 /// What a flow network predicts.

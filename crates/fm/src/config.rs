@@ -33,6 +33,8 @@
 //! [noise]
 //! kind = "matern:100"          # any form NoiseKind parses
 //! scale = 3.0                  # sigma: a factor, or "unit", or "data"
+//! prior = "none"               # or "gaussian": start from a Gaussian fit of the data plus the noise
+//! prior_directions = 64        # principal directions the Gaussian prior keeps
 //!
 //! [train]
 //! steps = 160000
@@ -88,6 +90,7 @@ use crate::coupling::Coupling;
 use crate::device::DeviceChoice;
 use crate::error::{FmError, Result};
 use crate::path::TimeSampling;
+pub use crate::prior::PriorKind;
 
 /// A training run: data, network, noise, optimization and sampling settings.
 ///
@@ -319,6 +322,24 @@ impl fmt::Display for NoiseScale {
     }
 }
 
+impl std::str::FromStr for NoiseScale {
+    type Err = String;
+
+    /// A positive number, `unit` or `data` (the TOML forms).
+    fn from_str(s: &str) -> std::result::Result<Self, Self::Err> {
+        match s {
+            "unit" => Ok(Self::Unit),
+            "data" => Ok(Self::Data),
+            other => match other.parse::<f64>() {
+                Ok(x) if x.is_finite() && x > 0.0 => Ok(Self::Factor(x)),
+                _ => Err(format!(
+                    "unknown noise scale {other:?}; expected a finite number > 0, \"unit\" or \"data\""
+                )),
+            },
+        }
+    }
+}
+
 impl Serialize for NoiseScale {
     fn serialize<S: Serializer>(&self, s: S) -> std::result::Result<S::Ok, S::Error> {
         match self {
@@ -388,7 +409,8 @@ pub struct NoiseConfig {
     /// sigma sqrt(m) n)`, i.e. the unit-amplitude noise times `sigma` (the
     /// solve is linear). Default `3.0`, the official recipe's value for its
     /// elastic-deformation data (bunny and fish; `5.0` for human poses, the
-    /// `paper` preset).
+    /// `paper` preset; `1.0` in the `cpu-deform` preset, whose data prior
+    /// already varies the start as the data does).
     ///
     /// Magnitudes: Matérn noise on a smooth closed surface has pointwise
     /// variance close to `1 / (4 pi tau)` (the continuous Matérn field's), so
@@ -399,6 +421,28 @@ pub struct NoiseConfig {
     /// noise of unit root-mean-square value and `"data"` matches the data's
     /// spread. See [`NoiseScale`].
     pub scale: NoiseScale,
+    /// A distribution added to every noise sample, fitted on the training
+    /// data when training starts and stored with the run
+    /// ([`crate::prior`]): `"none"` (the default, the paper's start) or
+    /// `"gaussian"`, the training signals' mean plus a draw with their
+    /// covariance, so the flow starts near a plausible signal and learns
+    /// only what the Gaussian gets wrong. On another triangulation the draw
+    /// is carried from the training mesh. Not written when `"none"`.
+    #[serde(skip_serializing_if = "PriorKind::is_none")]
+    pub prior: PriorKind,
+    /// Most principal directions of the training signals the Gaussian prior
+    /// keeps (default [`DEFAULT_PRIOR_DIRECTIONS`]; it keeps all there are
+    /// when the data has fewer, at most one less than the signals fitted
+    /// on). Not written at its default.
+    #[serde(skip_serializing_if = "is_default_prior_directions")]
+    pub prior_directions: usize,
+}
+
+/// The default of [`NoiseConfig::prior_directions`].
+pub const DEFAULT_PRIOR_DIRECTIONS: usize = 64;
+
+fn is_default_prior_directions(n: &usize) -> bool {
+    *n == DEFAULT_PRIOR_DIRECTIONS
 }
 
 impl Default for NoiseConfig {
@@ -408,6 +452,8 @@ impl Default for NoiseConfig {
                 tau: mfm_noise::kind::DEFAULT_TAU,
             },
             scale: NoiseScale::default(),
+            prior: PriorKind::None,
+            prior_directions: DEFAULT_PRIOR_DIRECTIONS,
         }
     }
 }
@@ -696,6 +742,18 @@ impl RunConfig {
             if !(x.is_finite() && x > 0.0) {
                 return bad("noise.scale", "finite and > 0", x.to_string());
             }
+        }
+        if self.noise.prior != PriorKind::None && self.noise.prior_directions == 0 {
+            return bad(
+                "noise.prior_directions",
+                "at least 1 with a prior",
+                "0".into(),
+            );
+        }
+        if self.noise.prior != PriorKind::None && t.augment.is_active() {
+            return Err(FmError::Config(
+                "noise.prior cannot be combined with train.augment (the prior is fitted to the shapes as they are, not scaled or shifted)".into(),
+            ));
         }
         if self.model.prediction == crate::checkpoint::Prediction::Clean && !t.center {
             return Err(FmError::Config(

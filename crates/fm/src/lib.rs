@@ -9,6 +9,7 @@ pub mod error;
 pub mod official;
 pub mod path;
 pub mod presets;
+pub mod prior;
 pub mod run_folder;
 pub mod sample;
 pub mod sample_folder;

@@ -424,6 +424,7 @@ impl OfficialConfig {
             training_surface: Some(SurfaceSize::of(template)),
             prediction: Prediction::Velocity,
             displacements: false,
+            prior: None,
         })
     }
 
@@ -791,11 +792,19 @@ pub fn import_official(
 ///
 /// # Errors
 /// The final model's integrity check ([`checkpoint::verify_final_model`]);
-/// [`FmError::Config`] for a run with a linear head, conditioning or a
-/// global context the official model does not have; the file's errors.
+/// [`FmError::Config`] for a run with a linear head, conditioning, a
+/// global context or a data prior the official model does not have; the
+/// file's errors.
 pub fn export_official(run: &Path, out: &Path) -> Result<usize> {
     checkpoint::verify_final_model(run)?;
-    if FlowSpec::read(run.join(FLOW_FILE))?.displacements {
+    let flow = FlowSpec::read(run.join(FLOW_FILE))?;
+    if flow.prior.is_some() {
+        return Err(FmError::Config(format!(
+            "{}: this run starts from a data prior (noise.prior); the official Matern_FM model starts from noise alone",
+            run.display()
+        )));
+    }
+    if flow.displacements {
         return Err(FmError::Config(format!(
             "{}: this run generates displacements of the sampled mesh (model.displacements); the official Matern_FM model generates positions",
             run.display()

@@ -30,6 +30,10 @@ pub struct Overrides {
     pub seed: Option<u64>,
     /// Noise the flow starts from (`noise.kind`).
     pub noise: Option<NoiseKind>,
+    /// The noise amplitude (`noise.scale`).
+    pub noise_scale: Option<crate::config::NoiseScale>,
+    /// The data prior added to the noise (`noise.prior`).
+    pub prior: Option<crate::prior::PriorKind>,
     /// Where to train (`train.device`).
     pub device: Option<DeviceChoice>,
 }
@@ -55,6 +59,12 @@ impl Overrides {
         }
         if let Some(k) = self.noise {
             config.noise.kind = k;
+        }
+        if let Some(x) = self.noise_scale {
+            config.noise.scale = x;
+        }
+        if let Some(p) = self.prior {
+            config.noise.prior = p;
         }
         if let Some(d) = self.device {
             config.train.device = d;

@@ -20,6 +20,11 @@
 //! [`Sampler::surface_warnings`] tells when a target's size does not match
 //! the training surface's.
 //!
+//! The prior: a run trained with `noise.prior` ([`crate::prior`]) adds to
+//! every noise sample a draw of its data prior, made on the training mesh
+//! and carried to the target's vertices ([`Sampler::prepare`] locates them
+//! once), before the centring below.
+//!
 //! The mean: for a centred run ([`FlowSpec::centered`], the default) the
 //! noise is centred by its mass-weighted mean and the dataset's mean
 //! ([`FlowSpec::velocity_offset`]) is added after the last step; for an
@@ -52,7 +57,9 @@ use crate::config::{OdeMethod, SampleConfig};
 use crate::context::sampling_parts;
 use crate::device::DeviceChoice;
 use crate::error::{FmError, Result};
+use crate::prior::{GaussianPrior, read_prior};
 use mfm_data::InMemorySignals;
+use mfm_data::transfer::Transfer;
 
 /// Relative size difference above which [`Sampler::surface_warnings`]
 /// speaks up.
@@ -208,6 +215,9 @@ pub struct TargetMesh {
     /// `None` when the sampler starts from given noise ([`Sampler::with_start_noise`]):
     /// its factor would go unused.
     noise: Option<NoiseSampler>,
+    /// The run's prior carried from the training mesh to this one (`None`
+    /// for a run without a prior, or a sampler with starting noise).
+    prior: Option<Transfer>,
     xyz: Tensor,
 }
 
@@ -277,6 +287,25 @@ pub fn batch_within_memory(faces: usize, width: usize, batch: usize) -> usize {
 /// ([`Sampler::carried_noise`]).
 pub const CARRY_TOLERANCE: f64 = 0.01;
 
+/// The vertices of `to` located on `from`'s surface ([`Transfer::locate`]),
+/// refused when one lies farther than [`CARRY_TOLERANCE`] of `to`'s
+/// bounding-box diagonal from it (`what` names `from` in the message).
+fn locate_within_tolerance(from: &TriMesh, to: &TriMesh, what: &str) -> Result<Transfer> {
+    let transfer = Transfer::locate(from, to)?;
+    let diagonal = to.bounding_box_diagonal();
+    let (vertex, distance) = transfer.farthest();
+    if distance > CARRY_TOLERANCE * diagonal {
+        return Err(FmError::Config(format!(
+            "vertex {vertex} of the mesh to sample lies {distance:.3e} from {what}, {:.1}% of its \
+             bounding-box diagonal (at most {}%): not a triangulation of the same surface in the \
+             same units",
+            100.0 * distance / diagonal,
+            100.0 * CARRY_TOLERANCE
+        )));
+    }
+    Ok(transfer)
+}
+
 /// The conditioning of a batch: `t: [B]` broadcast to `[B, V, 1]`, preceded
 /// by the positions `xyz: [1, V, 3]` when the flow is conditioned on them
 /// (`[B, V, 4]` = `[x, y, z, t]`).
@@ -312,6 +341,7 @@ pub struct Sampler {
     flow: FlowSpec,
     offset: Option<Tensor>,
     start: Option<StartNoise>,
+    prior: Option<GaussianPrior>,
 }
 
 /// Starting states given by the user ([`Sampler::with_start_noise`]) in
@@ -357,7 +387,35 @@ impl Sampler {
             flow,
             offset,
             start: None,
+            prior: None,
         })
+    }
+
+    /// Adds the run's data prior ([`crate::prior`]) to every start drawn:
+    /// what [`Sampler::load`] does for a run whose `flow.json` records one.
+    ///
+    /// # Errors
+    /// [`FmError::Config`] when the flow records no prior or its channels
+    /// differ from the prior's.
+    pub fn with_prior(mut self, prior: GaussianPrior) -> Result<Self> {
+        if self.flow.prior.is_none() || prior.channels() != self.flow.channels {
+            return Err(FmError::Config(format!(
+                "a prior of {} channels given to a run {}",
+                prior.channels(),
+                if self.flow.prior.is_none() {
+                    "whose flow.json records no prior".to_owned()
+                } else {
+                    format!("of {} channels", self.flow.channels)
+                }
+            )));
+        }
+        self.prior = Some(prior);
+        Ok(self)
+    }
+
+    /// The run's data prior (`None` without one).
+    pub fn prior(&self) -> Option<&GaussianPrior> {
+        self.prior.as_ref()
     }
 
     /// Starts the ODE of sample `i` from `start`'s sample `i` instead of
@@ -468,12 +526,13 @@ impl Sampler {
         Self::load_files(&dir.join(weights), &dir.join(FLOW_FILE), device)
     }
 
-    fn load_files(weights: &Path, flow: &Path, device: Option<Device>) -> Result<Self> {
+    fn load_files(weights: &Path, flow_path: &Path, device: Option<Device>) -> Result<Self> {
         let device = match device {
             Some(d) => d,
             None => DeviceChoice::Auto.resolve()?,
         };
-        let flow = FlowSpec::read(flow)?;
+        let flow = FlowSpec::read(flow_path)?;
+        let prior = read_prior(flow_path, &flow)?;
         let net = PoissonNet::load(weights, device)?;
         // a run whose training blew up can leave NaN or inf weights; every
         // sample would then fail deep inside the network
@@ -486,7 +545,11 @@ impl Sampler {
                 )));
             }
         }
-        Self::new(net, flow)
+        let sampler = Self::new(net, flow)?;
+        match prior {
+            Some(p) => sampler.with_prior(p),
+            None => Ok(sampler),
+        }
     }
 
     /// The flow spec.
@@ -517,10 +580,19 @@ impl Sampler {
         let (tensors, noise) = sampling_parts(&framed, noise)?;
         let per_block = faces_per_block(self.net.config().width);
         let blocks = (tensors.num_faces() > per_block).then(|| tensors.face_blocks(per_block));
+        let prior = match (&self.prior, &self.start) {
+            (Some(p), None) => Some(locate_within_tolerance(
+                p.mesh(),
+                &framed,
+                "the training surface the prior is fitted on",
+            )?),
+            _ => None,
+        };
         Ok(TargetMesh {
             mesh: tensors,
             blocks,
             noise,
+            prior,
             xyz: positions_tensor(framed.positions(), self.net.device()),
         })
     }
@@ -742,8 +814,9 @@ impl Sampler {
 
     /// The starting noise of samples `first .. first + count` of `seed` on
     /// the target: `[count, V, C]` `f32` on the network's device (the run's
-    /// noise kind, times its scale, centred by its mass-weighted mean for a
-    /// centred run), or those samples of the starting noise given with
+    /// noise kind, times its scale, plus the run's prior draws when it has
+    /// a prior, centred by its mass-weighted mean for a centred run), or
+    /// those samples of the starting noise given with
     /// [`Sampler::with_start_noise`], as given.
     ///
     /// # Errors
@@ -785,6 +858,26 @@ impl Sampler {
         if scale != 1.0 {
             values.iter_mut().for_each(|x| *x *= scale);
         }
+        match (&self.prior, &target.prior) {
+            (Some(prior), Some(transfer)) => {
+                prior.add_draws(&mut values, first, count, seed, Some(transfer))?
+            }
+            (None, _) if self.flow.prior.is_some() => {
+                return Err(FmError::Config(
+                    "the run's flow.json records a prior that this sampler was not given \
+                     (Sampler::with_prior; Sampler::load reads it)"
+                        .into(),
+                ));
+            }
+            (Some(_), None) => {
+                return Err(FmError::Config(
+                    "the target mesh was prepared without the run's prior: prepare it again \
+                     with this sampler"
+                        .into(),
+                ));
+            }
+            (None, _) => {}
+        }
         let x = Tensor::from_slice(&values)
             .reshape([count as i64, v, c as i64])
             .to_device(self.net.device());
@@ -819,18 +912,7 @@ impl Sampler {
         count: usize,
         seed: u64,
     ) -> Result<StartNoise> {
-        let transfer = mfm_data::transfer::Transfer::locate(from, to)?;
-        let diagonal = to.bounding_box_diagonal();
-        let (vertex, distance) = transfer.farthest();
-        if distance > CARRY_TOLERANCE * diagonal {
-            return Err(FmError::Config(format!(
-                "vertex {vertex} of the mesh to sample lies {distance:.3e} from the surface the noise is \
-                 drawn on, {:.1}% of its bounding-box diagonal (at most {}%): not a triangulation of \
-                 the same surface in the same units",
-                100.0 * distance / diagonal,
-                100.0 * CARRY_TOLERANCE
-            )));
-        }
+        let transfer = locate_within_tolerance(from, to, "the surface the noise is drawn on")?;
         let source = self.prepare(from)?;
         let x = self.noise(&source, 0, count, seed)?;
         let drawn = Vec::<f32>::try_from(&x.to_device(Device::Cpu).contiguous().view([-1]))?;

@@ -147,6 +147,7 @@ impl SampleFolder<'_> {
         let run_files = [
             CONFIG_FILE,
             FLOW_FILE,
+            crate::prior::PRIOR_FILE,
             WEIGHTS_FILE,
             NET_CONFIG_FILE,
             CHECKPOINTS_DIR,

@@ -10,6 +10,8 @@
 //! mesh, all in the frame:
 //! 1. `f_0`: noise on the training mesh (the run's kind, times its scale
 //!    `sigma`: by linearity `solve(L + tau M, sigma sqrt(m) n)`),
+//!    plus, with `noise.prior`, a draw of the data prior
+//!    ([`crate::prior`]) of the same index;
 //!    `t ~ U[0, 1)` per batch item (or another `train.time` distribution);
 //!    the noise samples are paired with the signals independently, or with
 //!    `train.coupling = "ot:P"` by the least-cost assignment within a pool
@@ -99,6 +101,7 @@ use crate::coupling::{Coupling, least_cost_assignment, squared_distances};
 use crate::device::DeviceChoice;
 use crate::error::{FmError, Result};
 use crate::path::rectified_path;
+use crate::prior::{GaussianPrior, PRIOR_FILE, PriorKind, read_prior};
 use crate::sample::{conditioning, offset_tensor};
 use mfm_data::signals::{Displacements, FramedPositions, SignalSource};
 
@@ -190,6 +193,8 @@ struct FlowObjective {
     offset: Option<Tensor>,
     signals: Arc<dyn SignalSource>,
     noise: NoiseSampler,
+    /// The data prior added to every noise sample (`noise.prior`).
+    prior: Option<GaussianPrior>,
     order: EpochOrder,
 }
 
@@ -359,6 +364,7 @@ fn resolve_flow(
         training_surface: Some(frame.size),
         prediction: config.model.prediction,
         displacements: config.model.displacements,
+        prior: None,
     })
 }
 
@@ -531,9 +537,28 @@ impl Trainer {
             signals,
         )?;
         let context = MeshContext::new(&framed_mesh, config.noise.kind)?;
-        let flow = resolve_flow(&config, &context.noise, framed_signals.as_ref(), frame)?;
+        let mut flow = resolve_flow(&config, &context.noise, framed_signals.as_ref(), frame)?;
+        let prior = match config.noise.prior {
+            PriorKind::None => None,
+            PriorKind::Gaussian => {
+                let prior = GaussianPrior::fit(
+                    &framed_mesh,
+                    framed_signals.as_ref(),
+                    config.noise.prior_directions,
+                )?;
+                flow.prior = Some(prior.write(&run_dir.join(PRIOR_FILE))?);
+                Some(prior)
+            }
+        };
         flow.write(run_dir.join(FLOW_FILE))?;
-        let t = Self::build(run_dir, config, flow, &framed_mesh, framed_signals, context)?;
+        let t = Self::build(
+            run_dir,
+            config,
+            flow,
+            (&framed_mesh, framed_signals),
+            context,
+            prior,
+        )?;
         t.run.start_log()?;
         Ok(t)
     }
@@ -640,7 +665,24 @@ impl Trainer {
             signals,
         )?;
         let context = MeshContext::new(&framed_mesh, config.noise.kind)?;
-        let mut t = Self::build(run_dir, config, flow, &framed_mesh, framed_signals, context)?;
+        let prior = read_prior(&info.dir.join(FLOW_FILE), &flow)?;
+        if let Some(p) = &prior {
+            if p.mesh().num_vertices() != framed_mesh.num_vertices() {
+                return Err(FmError::SizeMismatch {
+                    what: format!("vertices of the prior of {}", run_dir.display()),
+                    expected: framed_mesh.num_vertices(),
+                    found: p.mesh().num_vertices(),
+                });
+            }
+        }
+        let mut t = Self::build(
+            run_dir,
+            config,
+            flow,
+            (&framed_mesh, framed_signals),
+            context,
+            prior,
+        )?;
         t.run.resume_from(&info.dir, &state)?;
         t.resumed = Some(ResumeInfo {
             checkpoint: Some(info.dir),
@@ -650,8 +692,8 @@ impl Trainer {
         Ok(t)
     }
 
-    /// Builds a run from its flow spec; `mesh`, `signals` and `context` are
-    /// already in the flow's frame.
+    /// Builds a run from its flow spec; `data` (the mesh and signals) and
+    /// `context` are already in the flow's frame, `prior` is the flow's.
     ///
     /// Every constructor ends here: [`Trainer::new`] (and a resumed folder
     /// without checkpoints) through `start`, which resolves and writes the
@@ -661,10 +703,11 @@ impl Trainer {
         run_dir: PathBuf,
         config: RunConfig,
         flow: FlowSpec,
-        mesh: &TriMesh,
-        signals: Arc<dyn SignalSource>,
+        data: (&TriMesh, Arc<dyn SignalSource>),
         context: MeshContext,
+        prior: Option<GaussianPrior>,
     ) -> Result<Self> {
+        let (mesh, signals) = data;
         if config.train.augment.is_active() && flow.channels != 3 {
             return Err(FmError::Config(format!(
                 "train.augment scales and shifts positions: it needs 3-channel signals, the dataset has {}",
@@ -703,6 +746,7 @@ impl Trainer {
                 mesh: mesh_tensors,
                 signals,
                 noise,
+                prior,
                 order,
                 config,
             },
@@ -835,6 +879,9 @@ impl FlowObjective {
         let scale = self.flow.noise_scale as f32;
         if scale != 1.0 {
             noise.iter_mut().for_each(|x| *x *= scale);
+        }
+        if let Some(prior) = &self.prior {
+            prior.add_draws(&mut noise, first, pool, self.config.train.seed, None)?;
         }
         if self.config.train.coupling.is_independent() {
             return Ok((data, noise));

@@ -226,6 +226,7 @@ fn flow(noise: NoiseKind, offset: f64) -> FlowSpec {
         training_surface: None,
         prediction: Default::default(),
         displacements: false,
+        prior: None,
     }
 }
 

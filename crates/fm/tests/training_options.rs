@@ -1,7 +1,8 @@
 //! The training options beyond the official recipe: the weight average
 //! (`train.ema`), the time distribution (`train.time`), the Jacobian weight
-//! of the loss (`train.jacobian_weight`), kept snapshots (`train.keep_at`)
-//! and minibatch optimal transport (`train.coupling`): each changes what it
+//! of the loss (`train.jacobian_weight`), kept snapshots (`train.keep_at`),
+//! minibatch optimal transport (`train.coupling`) and the data prior
+//! (`noise.prior`): each changes what it
 //! says, resumes bit for bit, and is refused when out of range.
 #![allow(clippy::unwrap_used)]
 
@@ -11,10 +12,13 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use mfm_data::InMemorySignals;
+use mfm_fm::checkpoint::FlowSpec;
+use mfm_fm::config::PriorKind;
 use mfm_fm::config::RunConfig;
 use mfm_fm::coupling::{Coupling, least_cost_assignment, squared_distances};
 use mfm_fm::device::DeviceChoice;
 use mfm_fm::path::TimeSampling;
+use mfm_fm::prior::{GaussianPrior, PRIOR_FILE};
 use mfm_fm::sample::Sampler;
 use mfm_fm::train::Trainer;
 use mfm_geometry::{TriMesh, procedural};
@@ -513,5 +517,216 @@ fn global_context_runs_resume_bit_for_bit_and_are_not_exported_as_official() {
             .to_toml_string()
             .unwrap()
             .contains("global_context")
+    );
+}
+
+/// `noise.prior = "gaussian"`: the run fits the prior on its training
+/// signals in its frame, writes it once beside `flow.json` (which records
+/// its size and checksum), trains other weights than the plain run,
+/// resumes bit for bit, is refused by the official export, and a changed
+/// prior file is refused by name when sampling. Runs without a prior
+/// write neither the file nor the field.
+#[test]
+fn gaussian_prior_runs_store_their_fit_and_resume_bit_for_bit() {
+    let mesh = procedural::icosphere(1);
+    let s = signals(&mesh, 5);
+    let mut cfg = tiny(8);
+    let plain = tempfile::tempdir().unwrap();
+    train(plain.path(), cfg.clone(), &mesh, s.clone(), 8);
+    assert!(!plain.path().join(PRIOR_FILE).exists());
+    let text = std::fs::read_to_string(plain.path().join("flow.json")).unwrap();
+    assert!(!text.contains("prior"), "{text}");
+
+    cfg.noise.prior = PriorKind::Gaussian;
+    let with = tempfile::tempdir().unwrap();
+    train(with.path(), cfg.clone(), &mesh, s.clone(), 8);
+    let flow = FlowSpec::read(with.path().join("flow.json")).unwrap();
+    let spec = flow.prior.unwrap();
+    assert_eq!(
+        (spec.kind, spec.fitted_on, spec.directions),
+        (PriorKind::Gaussian, 5, 4)
+    );
+    // the file is the fit of the signals on the framed training mesh
+    let framed = flow.frame.apply(&mesh);
+    let stored = GaussianPrior::read(&with.path().join(PRIOR_FILE), &spec, 1).unwrap();
+    assert_eq!(stored, GaussianPrior::fit(&framed, s.as_ref(), 64).unwrap());
+    let w = bits(&weights(&with.path().join(WEIGHTS_FILE)));
+    assert_ne!(w, bits(&weights(&plain.path().join(WEIGHTS_FILE))));
+    assert_eq!(stopped_and_resumed(cfg.clone(), &mesh, &s, 5), w);
+    assert!(!mfm_fm::train::RESUMABLE_FIELDS.contains(&"noise.prior"));
+    // fewer directions asked for, fewer kept
+    let mut three = cfg.clone();
+    three.noise.prior_directions = 3;
+    let d = tempfile::tempdir().unwrap();
+    train(d.path(), three, &mesh, s.clone(), 1);
+    let spec3 = FlowSpec::read(d.path().join("flow.json"))
+        .unwrap()
+        .prior
+        .unwrap();
+    assert_eq!(spec3.directions, 3);
+
+    let out = with.path().join("official.ckpt");
+    let e = mfm_fm::official::export_official(with.path(), &out)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("noise.prior"), "{e}");
+    assert!(!out.exists());
+
+    Sampler::load(with.path(), Some(tch::Device::Cpu)).unwrap();
+    let path = with.path().join(PRIOR_FILE);
+    let mut bytes = std::fs::read(&path).unwrap();
+    let last = bytes.len() - 1;
+    bytes[last] ^= 1;
+    std::fs::write(&path, &bytes).unwrap();
+    let e = Sampler::load(with.path(), Some(tch::Device::Cpu))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("prior.safetensors") && e.contains("CRC-32"),
+        "{e}"
+    );
+    std::fs::remove_file(&path).unwrap();
+    let e = Sampler::load(with.path(), Some(tch::Device::Cpu))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("prior.safetensors"), "{e}");
+}
+
+/// A sampler of a prior run starts sample `i` from the plain run's noise
+/// plus draw `i` of the prior, carried from the training mesh to the
+/// target (here its midpoint refinement) and centred with the target's
+/// mass; draws do not depend on the batch; a target that is not the
+/// training surface is refused.
+#[test]
+fn a_prior_runs_start_is_its_noise_plus_the_carried_draw() {
+    let mesh = procedural::icosphere(1);
+    let s = signals(&mesh, 5);
+    let mut cfg = tiny(2);
+    cfg.noise.prior = PriorKind::Gaussian;
+    let dir = tempfile::tempdir().unwrap();
+    train(dir.path(), cfg, &mesh, s, 2);
+    let cpu = Some(tch::Device::Cpu);
+    let with = Sampler::load(dir.path(), cpu).unwrap();
+    let prior = with.prior().unwrap().clone();
+    let mut flow = with.flow().clone();
+    flow.prior = None;
+    let net = mfm_net::PoissonNet::load(dir.path().join(WEIGHTS_FILE), tch::Device::Cpu).unwrap();
+    let without = Sampler::new(net, flow.clone()).unwrap();
+
+    let fine = mfm_geometry::subdivide::midpoint(&mesh).unwrap();
+    let (tw, to) = (
+        with.prepare(&fine).unwrap(),
+        without.prepare(&fine).unwrap(),
+    );
+    let seed = 11;
+    let xw = Vec::<f32>::try_from(with.noise(&tw, 0, 3, seed).unwrap().flatten(0, -1)).unwrap();
+    let xo = Vec::<f32>::try_from(without.noise(&to, 0, 3, seed).unwrap().flatten(0, -1)).unwrap();
+    let framed = flow.frame.apply(&fine);
+    let transfer = mfm_data::transfer::Transfer::locate(prior.mesh(), &framed).unwrap();
+    let mass = mfm_geometry::operators::lumped_mass(&framed);
+    let total: f64 = mass.iter().sum();
+    let v = fine.num_vertices();
+    for i in 0..3 {
+        let g = transfer.apply(&prior.draw(i as u64, seed), 1).unwrap();
+        let mean: f64 = g
+            .iter()
+            .zip(&mass)
+            .map(|(&x, m)| f64::from(x) * m)
+            .sum::<f64>()
+            / total;
+        for j in 0..v {
+            let expected = f64::from(g[j]) - mean;
+            let found = f64::from(xw[i * v + j]) - f64::from(xo[i * v + j]);
+            assert!(
+                (expected - found).abs() < 1e-5,
+                "sample {i} vertex {j}: {found} vs {expected}"
+            );
+        }
+    }
+    // a draw does not depend on the batch it is drawn in
+    let part = Vec::<f32>::try_from(with.noise(&tw, 1, 2, seed).unwrap().flatten(0, -1)).unwrap();
+    assert_eq!(part, xw[v..]);
+    // a target prepared without the prior is refused, and so is another surface
+    let e = with.noise(&to, 0, 1, seed).unwrap_err().to_string();
+    assert!(e.contains("without the run's prior"), "{e}");
+    let big = TriMesh::new(
+        mesh.positions()
+            .iter()
+            .map(|p| p.map(|x| 1.5 * x))
+            .collect(),
+        mesh.faces().to_vec(),
+    )
+    .unwrap();
+    let e = with.prepare(&big).unwrap_err().to_string();
+    assert!(e.contains("the prior is fitted on"), "{e}");
+}
+
+/// The prior's draws have the fitted signals' mean and sample covariance
+/// (20,000 draws, every entry within 3% of the largest variance), and the
+/// config fields read from TOML, are written only when set and refuse
+/// what they cannot do.
+#[test]
+fn gaussian_prior_draws_have_the_datas_mean_and_covariance() {
+    let mesh = procedural::icosphere(1);
+    let v = mesh.num_vertices();
+    let s = signals(&mesh, 6);
+    let prior = GaussianPrior::fit(&mesh, s.as_ref(), 64).unwrap();
+    assert_eq!(prior.directions(), 5);
+    let n = 20_000;
+    let mut x = vec![0.0f32; n * v];
+    prior.add_draws(&mut x, 0, n, 3, None).unwrap();
+    let mean = |rows: &[&[f32]], j: usize| -> f64 {
+        rows.iter().map(|r| f64::from(r[j])).sum::<f64>() / rows.len() as f64
+    };
+    let cov = |rows: &[&[f32]], a: usize, b: usize, ddof: usize| -> f64 {
+        let (ma, mb) = (mean(rows, a), mean(rows, b));
+        rows.iter()
+            .map(|r| (f64::from(r[a]) - ma) * (f64::from(r[b]) - mb))
+            .sum::<f64>()
+            / (rows.len() - ddof) as f64
+    };
+    let data: Vec<&[f32]> = (0..6).map(|i| s.signal(i)).collect();
+    let draws: Vec<&[f32]> = x.chunks(v).collect();
+    let largest = (0..v).map(|j| cov(&data, j, j, 1)).fold(0.0, f64::max);
+    assert!(largest > 1e-3);
+    for a in 0..v {
+        assert!((mean(&draws, a) - mean(&data, a)).abs() < 0.03 * largest.sqrt());
+        for b in 0..v {
+            let (d, g) = (cov(&data, a, b, 1), cov(&draws, a, b, 1));
+            assert!((d - g).abs() < 0.03 * largest, "cov[{a}, {b}]: {g} vs {d}");
+        }
+    }
+
+    let c = RunConfig::from_toml_str(
+        "[noise]\nprior = \"gaussian\"\nprior_directions = 8\n",
+        "t.toml",
+    )
+    .unwrap();
+    assert_eq!(
+        (c.noise.prior, c.noise.prior_directions),
+        (PriorKind::Gaussian, 8)
+    );
+    let text = c.to_toml_string().unwrap();
+    assert!(text.contains("prior = \"gaussian\"") && text.contains("prior_directions = 8"));
+    assert!(
+        !RunConfig::default()
+            .to_toml_string()
+            .unwrap()
+            .contains("prior")
+    );
+    let e = RunConfig::from_toml_str("[noise]\nprior = \"laplace\"\n", "t.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("laplace") && e.contains("gaussian"), "{e}");
+    let mut zero = c.clone();
+    zero.noise.prior_directions = 0;
+    let e = zero.validate().unwrap_err().to_string();
+    assert!(e.contains("noise.prior_directions"), "{e}");
+    let mut augmented = c;
+    augmented.train.augment.shift = 0.1;
+    let e = augmented.validate().unwrap_err().to_string();
+    assert!(
+        e.contains("noise.prior") && e.contains("train.augment"),
+        "{e}"
     );
 }

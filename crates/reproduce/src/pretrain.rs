@@ -238,7 +238,8 @@ pub const ELEPHANT_MESH: &str = "../shared/meshes/elephant.obj";
 
 /// The elephant model's run configuration: the `cpu-deform` preset (W32
 /// K3 conditioned on the source xyz, warm-up and cosine decay to 1e-5,
-/// logit-normal times, weight average, 5 midpoint steps to sample) with
+/// logit-normal times, weight average, 5 midpoint steps to sample) as it
+/// was before its data prior (the model starts from noise alone), with
 /// smooth Matérn noise, whose samples keep no noise texture on meshes many
 /// times finer (docs/BENCHMARKS.md, "Noise texture and cost against
 /// resolution"), for 6000 steps instead of the preset's 3000 (the poses
