@@ -37,9 +37,8 @@ use rand_distr::StandardNormal;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
-use mfm_data::{DataError, InMemorySignals, Result, SignalSource};
-
 use mfm_data::principal::mean_signal;
+use mfm_data::{DataError, InMemorySignals, Result, SignalSource};
 
 /// The Gaussian baseline's measures, each defined as the samples' are
 /// ([`crate::shape_quality`] module docs), for as many draws as samples.
